@@ -1,0 +1,105 @@
+"""Tracer throughput against raw Embree, and the speed-up of two workers over one.
+
+On one sphere scene (runs/spheres_phi030.toml unless --config is given):
+
+1. trace batches with one worker and count path segments per second of tracing (scene
+   building excluded), recording every ray batch handed to Embree;
+2. replay exactly those ray batches through ``embreex`` alone (same calls, same sizes), in the
+   same process right after, for the raw intersection rate;
+3. run the whole config with 1 and then 2 workers (builds included) for the speed-up.
+
+``ratio`` = segments_per_s / raw_rays_per_s: the share of Embree's own speed the tracer keeps
+after its numba kernels. Prints a table, and with --json one JSON object on the last line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+import geometry
+from microsim import config as config_module
+from microsim import runner
+from microsim.integrator import PathState, trace_batch
+from microsim.rng import geometry_rng, stream_key
+from microsim.sensor import Sensor
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+class RecordingScene:
+    """Forwards ``run`` to an Embree scene and keeps a copy of every ray batch."""
+
+    def __init__(self, scene):
+        self.scene = scene
+        self.batches = []
+
+    def run(self, origins, directions, dists, output):
+        self.batches.append((origins.copy(), directions.copy(), dists.copy()))
+        return self.scene.run(origins, directions, dists=dists, output=output)
+
+
+def tracer_vs_embree(cfg, paths: int, repeats: int = 3):
+    plan = runner.Plan.from_config(cfg)
+    generator = geometry.SCENES[cfg.scene.kind]
+    scene = generator.generate(plan.scene, cfg, geometry_rng(cfg.run.seed, 0))
+    embree_scene = scene.embree()
+    sensor = Sensor.build(plan.sensor_cells)
+    state = PathState(paths)
+    wi = plan.incidence_direction(0)
+    trace_batch(scene, embree_scene, sensor, wi, 1000, stream_key(0, 0, 0), 0)  # compile
+    best_trace, best_raw, segments = np.inf, np.inf, 0
+    for k in range(repeats):
+        recorder = RecordingScene(embree_scene)
+        start = time.perf_counter()
+        tally = trace_batch(scene, recorder, sensor, wi, paths, stream_key(cfg.run.seed, 0, k), 0, state)
+        best_trace = min(best_trace, time.perf_counter() - start)
+        segments = int(tally.counts[0])
+        start = time.perf_counter()
+        for origins, directions, dists in recorder.batches:
+            embree_scene.run(origins, directions, dists=dists, output=1)
+        best_raw = min(best_raw, time.perf_counter() - start)
+    return segments / best_trace, segments / best_raw, segments, scene.n_triangles
+
+
+def worker_speedup(cfg):
+    timings = {}
+    for workers in (1, 2):
+        start = time.perf_counter()
+        runner.run(cfg, workers=workers)
+        timings[workers] = time.perf_counter() - start
+    return timings[1] / timings[2], timings
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--config", default=str(ROOT / "runs" / "spheres_phi030.toml"))
+    parser.add_argument("--paths", type=int, default=200_000, help="paths of the traced batch")
+    parser.add_argument("--run-paths", type=int, default=400_000, help="paths per incidence of the worker runs")
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+    cfg = config_module.load(args.config)
+    segments_per_s, raw_per_s, segments, triangles = tracer_vs_embree(cfg, args.paths)
+    run_cfg = config_module.load(args.config, {"run.paths": args.run_paths, "run.realizations": 8})
+    speedup, timings = worker_speedup(run_cfg)
+    result = {
+        "segments_per_s": segments_per_s,
+        "raw_rays_per_s": raw_per_s,
+        "ratio": segments_per_s / raw_per_s,
+        "speedup_2_workers": speedup,
+    }
+    print(f"scene: {args.config} ({triangles} triangles), {segments} segments traced")
+    print(f"tracer      {segments_per_s / 1e6:8.3f} M segments/s (1 worker)")
+    print(f"raw embreex {raw_per_s / 1e6:8.3f} M rays/s on the same ray batches")
+    print(f"ratio       {result['ratio']:8.3f}")
+    print(f"run, 1 worker {timings[1]:.1f} s, 2 workers {timings[2]:.1f} s: speed-up {speedup:.2f}")
+    if args.json:
+        print(json.dumps(result))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,270 @@
+"""Run configs (CONVENTIONS 4): TOML in, validated pydantic models out, one-line errors.
+
+Every section is a strict pydantic model: unknown keys, wrong types and out-of-range values
+are rejected. Scene kinds come from the generator registry (``geometry.SCENES``), each with
+its own model, selected by ``kind``. :func:`load` turns any problem into a :class:`ConfigError`
+whose message is one line naming the key and the accepted values.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+import typing
+from pathlib import Path
+from typing import Annotated, Literal, Union
+
+import annotated_types
+import pydantic
+from pydantic import BaseModel, Field
+
+import geometry
+
+from .schema import Section
+
+
+class ConfigError(ValueError):
+    """A bad config: the message is one line naming the key and what is accepted."""
+
+
+class Lambert(Section):
+    kind: Literal["lambert"]
+    albedo: float = Field(ge=0.0, le=1.0, description="Lambertian albedo")
+
+
+class Absorber(Section):
+    kind: Literal["absorber"]
+
+
+class Conductor(Section):
+    kind: Literal["conductor"]
+    eta: float = Field(gt=0.0, le=100.0, description="real part of the complex index")
+    k: float = Field(ge=0.0, le=100.0, description="imaginary part of the complex index")
+
+
+class InterfacedLambert(Section):
+    kind: Literal["interfaced_lambert"]
+    albedo: float = Field(ge=0.0, le=1.0, description="albedo K_d of the Lambertian body")
+    eta: float = Field(ge=1.0, le=4.0, description="refractive index ratio n_i of the interface")
+
+
+Material = Annotated[Union[Lambert, Absorber, Conductor, InterfacedLambert], Field(discriminator="kind")]
+Scene = Annotated[Union[tuple(g.Config for g in geometry.SCENES.values())], Field(discriminator="kind")]
+
+
+class Illumination(Section):
+    theta_i_deg: list[Annotated[float, Field(ge=0.0, le=89.9)]] = Field(min_length=1, max_length=256)
+    phi_i_deg: float = Field(0.0, ge=-360.0, le=360.0)
+
+    @pydantic.field_validator("theta_i_deg", mode="before")
+    @classmethod
+    def _scalar_to_list(cls, v):
+        return [v] if isinstance(v, (int, float)) and not isinstance(v, bool) else v
+
+
+class SensorSection(Section):
+    cells: int = Field(3240, ge=1, le=1_000_000)
+
+
+class Run(Section):
+    paths: int = Field(ge=1, le=10**12, description="paths per incidence, over all realizations")
+    realizations: int = Field(32, ge=2, le=100_000, description="independent geometry samples = batches of the standard errors")
+    seed: int = Field(1, ge=0, le=2**63 - 1)
+    max_order: int = Field(0, ge=0, le=1_000_000)
+
+
+class Config(Section):
+    name: str | None = Field(None, max_length=200)
+    scene: Scene
+    material: Material
+    base: Material | None = None
+    illumination: Illumination
+    sensor: SensorSection = SensorSection()
+    run: Run
+
+
+def load(path: str | Path, overrides: dict | None = None) -> Config:
+    """Read and validate a TOML config; ``overrides`` replace keys as {"run.paths": 1000}."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise ConfigError(f"config file {str(path)!r} not found") from None
+    except OSError as err:
+        raise ConfigError(f"config file {str(path)!r} cannot be read: {err.strerror}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"config file {str(path)!r} is not valid TOML: {err}") from None
+    for dotted, value in (overrides or {}).items():
+        section, key = dotted.split(".")
+        data.setdefault(section, {})[key] = value
+    return validate(data)
+
+
+def validate(data: dict) -> Config:
+    """Validate a config dictionary (as parsed from TOML)."""
+    try:
+        config = Config.model_validate(data)
+    except pydantic.ValidationError as err:
+        raise ConfigError(describe_error(err.errors()[0], data)) from None
+    try:
+        geometry.SCENES[config.scene.kind].check(config)
+    except ValueError as err:
+        raise ConfigError(str(err)) from None
+    return config
+
+
+def describe_error(error: dict, data: dict) -> str:
+    """One line for one pydantic error: the dotted key, the value given, what is accepted."""
+    model, keys, value = Config, [], data
+    for part in error["loc"]:
+        if isinstance(part, int):
+            keys[-1] += f"[{part}]"
+            value = value[part] if isinstance(value, list) and part < len(value) else None
+            continue
+        field = _field(model, part)
+        if field is None and model is not None and _tagged_member(model, part) is not None:
+            model = _tagged_member(model, part)  # discriminator tag in the error path
+            continue
+        keys.append(part)
+        value = value.get(part) if isinstance(value, dict) else None
+        model = field
+    key = ".".join(keys) or "config"
+    kind = error["type"]
+    shown = f" = {value!r}" if value is not None and not isinstance(value, dict) else ""
+    if kind == "extra_forbidden":
+        parent = _owner(Config, error["loc"][:-1], data)
+        allowed = ", ".join(parent.model_fields) if parent is not None else ""
+        return f"{key}: unknown key; allowed keys here: {allowed}"
+    if kind == "missing":
+        return f"{key}: missing; {_accepted(model, error)}"
+    if kind in ("union_tag_invalid", "union_tag_not_found"):
+        tags = ", ".join(repr(typing.get_args(m.model_fields["kind"].annotation)[0]) for m in _union_members(model))
+        given = value.get("kind") if isinstance(value, dict) else None
+        if given is None:
+            return f"{key}.kind: missing; accepted: {tags}"
+        return f"{key}.kind = {given!r}: unknown kind; accepted: {tags}"
+    problem = "out of range" if kind in _RANGE_ERRORS else error["msg"].lower()
+    return f"{key}{shown}: {problem}; {_accepted(model, error)}"
+
+
+_RANGE_ERRORS = {"greater_than", "greater_than_equal", "less_than", "less_than_equal", "too_short", "too_long"}
+
+
+def _field(model, name):
+    """The annotation of field ``name`` of ``model``: a model class, a tagged union, or a FieldInfo."""
+    if not (isinstance(model, type) and issubclass(model, BaseModel)) or name not in model.model_fields:
+        return None
+    info = model.model_fields[name]
+    inner = _unwrap(info.annotation)
+    if isinstance(inner, type) and issubclass(inner, BaseModel):
+        return inner
+    if _union_members(inner):
+        return inner
+    if typing.get_origin(inner) is list:
+        (item,) = typing.get_args(inner)
+        return _ItemField(info, item)
+    return info
+
+
+class _ItemField:
+    """A list field: its own constraints, and the constraints of each item."""
+
+    def __init__(self, info, item):
+        self.info, self.item = info, item
+
+
+def _unwrap(annotation):
+    args = typing.get_args(annotation)
+    if typing.get_origin(annotation) in (Union, getattr(__import__("types"), "UnionType", Union)):
+        non_none = [a for a in args if a is not type(None)]
+        if len(non_none) == 1:
+            return _unwrap(non_none[0])
+    if typing.get_origin(annotation) is Annotated:
+        return _unwrap(args[0])
+    return annotation
+
+
+def _union_members(annotation) -> list:
+    if typing.get_origin(annotation) is Annotated:
+        annotation = typing.get_args(annotation)[0]
+    if typing.get_origin(annotation) is Union:
+        members = [a for a in typing.get_args(annotation) if isinstance(a, type) and issubclass(a, BaseModel)]
+        return members if all("kind" in m.model_fields for m in members) else []
+    return []
+
+
+def _tagged_member(union, tag):
+    for member in _union_members(union):
+        if typing.get_args(member.model_fields["kind"].annotation) == (tag,):
+            return member
+    return None
+
+
+def _owner(model, loc, data):
+    """The model class that owns the last key of ``loc`` (to list its allowed keys)."""
+    current = model
+    for part in loc:
+        if isinstance(part, int):
+            continue
+        nxt = _field(current, part)
+        if nxt is None:
+            nxt = _tagged_member(current, part)
+        if isinstance(nxt, type) and issubclass(nxt, BaseModel):
+            current = nxt
+        elif _union_members(nxt):
+            current = nxt
+        else:
+            return None
+    return current if isinstance(current, type) else None
+
+
+def _accepted(field, error) -> str:
+    """What a field accepts, from its type and its numeric bounds."""
+    if isinstance(field, _ItemField):
+        if isinstance(error["loc"][-1], int):
+            return "accepted: a number in " + _range(typing.get_args(field.item)[1:], "")
+        return "accepted: a list of numbers, each in " + _range(typing.get_args(field.item)[1:], "") + _length(field.info)
+    if isinstance(field, type) and issubclass(field, BaseModel):
+        return "accepted: a table with keys " + ", ".join(field.model_fields)
+    if _union_members(field):
+        return "accepted: a table with a kind among " + ", ".join(
+            typing.get_args(m.model_fields["kind"].annotation)[0] for m in _union_members(field)
+        )
+    if field is None:
+        return ""
+    kind = _unwrap(field.annotation)
+    if kind is float or kind is int:
+        what = "an integer" if kind is int else "a number"
+        return f"accepted: {what} in {_range(field.metadata, '')}"
+    if kind is str:
+        return "accepted: a string"
+    if typing.get_origin(kind) is Literal:
+        return "accepted: " + ", ".join(map(repr, typing.get_args(kind)))
+    return f"accepted: {getattr(kind, '__name__', kind)}"
+
+
+def _range(metadata, _) -> str:
+    lo, hi, lo_open, hi_open = -math.inf, math.inf, False, False
+    for m in metadata:
+        if isinstance(m, annotated_types.Gt):
+            lo, lo_open = m.gt, True
+        elif isinstance(m, annotated_types.Ge):
+            lo, lo_open = m.ge, False
+        elif isinstance(m, annotated_types.Lt):
+            hi, hi_open = m.lt, True
+        elif isinstance(m, annotated_types.Le):
+            hi, hi_open = m.le, False
+        elif hasattr(m, "metadata"):
+            return _range(m.metadata, _)
+    left = "(" if lo_open or math.isinf(lo) else "["
+    right = ")" if hi_open or math.isinf(hi) else "]"
+    return f"{left}{lo:g}, {hi:g}{right}"
+
+
+def _length(info) -> str:
+    for m in info.metadata:
+        if isinstance(m, annotated_types.MinLen):
+            return f" (at least {m.min_length})"
+    return ""

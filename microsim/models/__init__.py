@@ -1,0 +1,20 @@
+"""Analytic BRDF models behind one API (CONVENTIONS 8).
+
+    from microsim import models
+    m = models.create("lambert_sphere", albedo=0.8)
+    f = m(wi, wo)          # wi, wo: (..., 3) unit vectors; f: (...,) in 1/sr
+
+Every module of this package that defines a model registers it with ``@register``; the
+modules are imported here so that ``create`` sees all of them (a plugin registry in the
+manner of Mitsuba 3).
+"""
+
+import importlib
+import pkgutil
+
+from .base import BRDFModel, Param, available, create, get, register
+
+for _module in pkgutil.iter_modules(__path__):
+    importlib.import_module(f"{__name__}.{_module.name}")
+
+__all__ = ["BRDFModel", "Param", "available", "create", "get", "register"]

@@ -1,0 +1,7 @@
+"""Base of every config section: strict types, no unknown keys (CONVENTIONS 4)."""
+
+from pydantic import BaseModel, ConfigDict
+
+
+class Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)

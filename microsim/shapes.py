@@ -1,0 +1,107 @@
+"""Analytic shapes behind the triangle meshes: exact surface points and shading normals.
+
+Embree finds which triangle a ray hits; the triangle's shape then gives the exact surface
+point (the hit projected onto the analytic surface) and the analytic normal there. Every
+shape is a row of ``Shapes``: a kind code and up to ``N_PARAMS`` float64 parameters.
+
+Kinds and parameters:
+
+- ``SPHERE``: centre (3), radius used for the normal, radius onto which hit points are
+  projected (the mesh's circumscribed radius, so that a projected point is never inside the
+  sphere's own convex mesh).
+- ``PLANE``: a point (3) and the unit normal (3). Base planes and V-groove facets.
+- ``ELLIPSOID``: centre (3), semi-axes (3) along x, y, z, projection scale (>= 1, the mesh's
+  circumscribed scale). Micrograins are the upper halves of such ellipsoids.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+SPHERE = 0
+PLANE = 1
+ELLIPSOID = 2
+N_PARAMS = 7
+
+
+@dataclass
+class Shapes:
+    """Analytic data of every shape of a scene (one row per shape)."""
+
+    kind: np.ndarray  # (S,) int32
+    params: np.ndarray  # (S, N_PARAMS) float64
+    material: np.ndarray  # (S,) int32 index into the scene's material table
+    size: np.ndarray  # (S,) float64 characteristic length, scales the ray offset
+
+    @classmethod
+    def empty(cls) -> "Shapes":
+        return cls(
+            np.zeros(0, np.int32), np.zeros((0, N_PARAMS)), np.zeros(0, np.int32), np.zeros(0)
+        )
+
+    def __len__(self) -> int:
+        return len(self.kind)
+
+    @staticmethod
+    def concatenate(parts: list["Shapes"]) -> "Shapes":
+        return Shapes(
+            np.concatenate([p.kind for p in parts]).astype(np.int32),
+            np.concatenate([p.params for p in parts]),
+            np.concatenate([p.material for p in parts]).astype(np.int32),
+            np.concatenate([p.size for p in parts]),
+        )
+
+    @staticmethod
+    def spheres(centres, radius, project_radius, material) -> "Shapes":
+        n = len(centres)
+        params = np.zeros((n, N_PARAMS))
+        params[:, 0:3] = centres
+        params[:, 3] = radius
+        params[:, 4] = project_radius
+        return Shapes(np.full(n, SPHERE, np.int32), params, np.full(n, material, np.int32), np.full(n, radius))
+
+    @staticmethod
+    def planes(points, normals, material, size) -> "Shapes":
+        n = len(points)
+        params = np.zeros((n, N_PARAMS))
+        params[:, 0:3] = points
+        params[:, 3:6] = normals / np.linalg.norm(normals, axis=1)[:, None]
+        return Shapes(np.full(n, PLANE, np.int32), params, np.full(n, material, np.int32), np.full(n, size, float))
+
+    @staticmethod
+    def ellipsoids(centres, semi_axes, project_scale, material) -> "Shapes":
+        n = len(centres)
+        params = np.zeros((n, N_PARAMS))
+        params[:, 0:3] = centres
+        params[:, 3:6] = semi_axes
+        params[:, 6] = project_scale
+        return Shapes(
+            np.full(n, ELLIPSOID, np.int32), params, np.full(n, material, np.int32), np.min(semi_axes, axis=1)
+        )
+
+
+@numba.njit(cache=True)
+def surface_point(kind, prm, x, y, z):
+    """Project the hit (x, y, z) onto the analytic shape; return the point and unit normal."""
+    if kind == SPHERE:
+        vx, vy, vz = x - prm[0], y - prm[1], z - prm[2]
+        inv = 1.0 / math.sqrt(vx * vx + vy * vy + vz * vz)
+        nx, ny, nz = vx * inv, vy * inv, vz * inv
+        r = prm[4]
+        return prm[0] + r * nx, prm[1] + r * ny, prm[2] + r * nz, nx, ny, nz
+    if kind == PLANE:
+        nx, ny, nz = prm[3], prm[4], prm[5]
+        d = (x - prm[0]) * nx + (y - prm[1]) * ny + (z - prm[2]) * nz
+        return x - d * nx, y - d * ny, z - d * nz, nx, ny, nz
+    # ELLIPSOID: radial projection in the frame where the ellipsoid is the unit sphere
+    ax, ay, az = prm[3], prm[4], prm[5]
+    ux, uy, uz = (x - prm[0]) / ax, (y - prm[1]) / ay, (z - prm[2]) / az
+    s = prm[6] / math.sqrt(ux * ux + uy * uy + uz * uz)
+    ux, uy, uz = ux * s, uy * s, uz * s
+    gx, gy, gz = ux / ax, uy / ay, uz / az
+    inv = 1.0 / math.sqrt(gx * gx + gy * gy + gz * gz)
+    return prm[0] + ux * ax, prm[1] + uy * ay, prm[2] + uz * az, gx * inv, gy * inv, gz * inv

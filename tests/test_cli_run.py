@@ -1,0 +1,144 @@
+"""`microsim run` end to end: determinism across workers (acceptance e), bad input (acceptance f)."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from microsim.cli import main
+
+SPHERES = """
+name = "small"
+[scene]
+kind = "poisson_spheres"
+volume_fraction = 0.3
+tile = 16.0
+depth = 8.0
+[material]
+kind = "lambert"
+albedo = 0.8
+[illumination]
+theta_i_deg = [0.0, 60.0]
+[sensor]
+cells = 200
+[run]
+paths = 20_000
+realizations = 4
+seed = 5
+"""
+
+PROVENANCE = {"created_utc", "wall_time_s"}
+
+
+def datasets(path):
+    out = {}
+    with h5py.File(path, "r") as h5:
+        h5.visititems(lambda name, obj: out.__setitem__(name, obj[()]) if isinstance(obj, h5py.Dataset) else None)
+        attrs = {k: v for k, v in h5.attrs.items() if k not in PROVENANCE}
+        scene = dict(h5["scene"].attrs)
+    return out, attrs, scene
+
+
+def test_tables_are_bit_identical_for_any_number_of_workers(tmp_path):
+    config = tmp_path / "small.toml"
+    config.write_text(SPHERES)
+    one, two = tmp_path / "one.h5", tmp_path / "two.h5"
+    for out, workers in ((one, "1"), (two, "2")):
+        done = subprocess.run([sys.executable, "-m", "microsim.cli", "run", str(config), "--out", str(out),
+                               "--workers", workers], capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr
+        assert f"table written to {out}" in done.stdout
+    (d1, a1, s1), (d2, a2, s2) = datasets(one), datasets(two)
+    assert d1.keys() == d2.keys() and a1.keys() == a2.keys() and s1 == s2
+    for key in d1:
+        assert d1[key].dtype == d2[key].dtype and np.array_equal(d1[key], d2[key]), key
+        assert d1[key].tobytes() == d2[key].tobytes(), key
+    for key in a1:
+        assert a1[key] == a2[key], key
+
+
+def test_existing_table_is_not_overwritten_without_force(tmp_path, capsys):
+    config = tmp_path / "small.toml"
+    config.write_text(SPHERES.replace("paths = 20_000", "paths = 200"))
+    out = tmp_path / "t.h5"
+    out.write_bytes(b"precious")
+    assert main(["run", str(config), "--out", str(out)]) == 2
+    assert out.read_bytes() == b"precious"
+    assert "--force" in capsys.readouterr().err
+    assert main(["run", str(config), "--out", str(out), "--force"]) == 0
+    assert h5py.is_hdf5(out)
+
+
+def edit(old, new):
+    return lambda text: text.replace(old, new)
+
+
+BAD_CONFIGS = {
+    "volume fraction out of range": (edit("volume_fraction = 0.3", "volume_fraction = 1.5"), "scene.volume_fraction"),
+    "unknown scene key": (edit("depth = 8.0", "depth = 8.0\nradius = 2.0"), "scene.radius"),
+    "unknown scene kind": (edit('kind = "poisson_spheres"', 'kind = "cubes"'), "scene.kind"),
+    "unknown material kind": (edit('kind = "lambert"', 'kind = "velvet"'), "material.kind"),
+    "wrong type": (edit("volume_fraction = 0.3", 'volume_fraction = "dense"'), "scene.volume_fraction"),
+    "boolean for a number": (edit("albedo = 0.8", "albedo = true"), "material.albedo"),
+    "broken TOML": (edit("[material]", "[material"), "TOML"),
+    "missing material parameter": (edit("albedo = 0.8\n", ""), "material.albedo"),
+    "missing conductor k": (edit('kind = "lambert"\nalbedo = 0.8', 'kind = "conductor"\neta = 1.2'), "material.k"),
+    "incidence out of range": (edit("[0.0, 60.0]", "[0.0, 95.0]"), "illumination.theta_i_deg"),
+    "negative paths": (edit("paths = 20_000", "paths = -5"), "run.paths"),
+    "fractional paths": (edit("paths = 20_000", "paths = 2.5"), "run.paths"),
+    "unknown section": (lambda text: text + "\n[extra]\nfoo = 1\n", "extra"),
+    "missing run section": (edit("[run]\npaths = 20_000\nrealizations = 4\nseed = 5\n", ""), "run"),
+    "one realization": (edit("realizations = 4", "realizations = 1"), "run.realizations"),
+    "base under a plane": (lambda text: text.replace('kind = "poisson_spheres"\nvolume_fraction = 0.3\ntile = 16.0\ndepth = 8.0',
+                                                     'kind = "plane"') + '\n[base]\nkind = "absorber"\n', "base"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_CONFIGS))
+def test_bad_config_gives_one_line_naming_the_key_and_exit_2(case, tmp_path, capsys):
+    change, key = BAD_CONFIGS[case]
+    config = tmp_path / "bad.toml"
+    config.write_text(change(SPHERES))
+    out = tmp_path / "bad.h5"
+    assert main(["run", str(config), "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and key in lines[0] and "Traceback" not in captured.err
+    assert captured.out == ""
+    assert not out.exists() and list(tmp_path.iterdir()) == [config]
+
+
+@pytest.mark.parametrize("argv, key", [
+    (["run", "missing.toml"], "missing.toml"),
+    (["run", "{config}", "--workers", "0"], "--workers"),
+    (["run", "{config}", "--paths", "many"], "--paths"),
+    (["run", "{config}", "--seed", "-1"], "--seed"),
+    (["run", "{config}", "--out", "/no/such/dir/t.h5"], "--out"),
+    (["frobnicate"], "frobnicate"),
+])
+def test_bad_command_line_gives_one_line_and_exit_2(argv, key, tmp_path, capsys):
+    config = tmp_path / "ok.toml"
+    config.write_text(SPHERES)
+    assert main([a.format(config=config) for a in argv]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and key in lines[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ok.toml"]
+
+
+def test_console_script_exit_status(tmp_path):
+    script = Path(sys.executable).parent / "microsim"  # installed next to the interpreter running the tests
+    done = subprocess.run([str(script), "run", str(tmp_path / "nope.toml")], capture_output=True, text=True)
+    assert done.returncode == 2 and done.stderr.count("\n") == 1 and "Traceback" not in done.stderr
+
+
+def test_shipped_configs_validate():
+    from microsim import config
+
+    runs = Path(__file__).parent.parent / "runs"
+    shipped = sorted(runs.glob("*.toml"))
+    assert {"plane.toml", "spheres_phi010.toml", "spheres_phi030.toml", "spheres_phi060.toml"} <= {p.name for p in shipped}
+    for path in shipped:
+        config.load(path)

@@ -1,0 +1,55 @@
+"""Materials on a flat plane, where their answers are exact."""
+
+import numpy as np
+import pytest
+
+from microsim.fresnel import fresnel_conductor, fresnel_dielectric
+
+
+def plane(material, theta, paths=200_000, cells=400):
+    return {
+        "scene": {"kind": "plane"}, "material": material,
+        "illumination": {"theta_i_deg": theta}, "sensor": {"cells": cells},
+        "run": {"paths": paths, "realizations": 64, "seed": 2},
+    }
+
+
+def test_conductor_plane_is_a_mirror_with_fresnel_weight(simulate):
+    t = simulate(plane({"kind": "conductor", "eta": 0.2, "k": 3.0}, [0.0, 40.0, 75.0], paths=2000))
+    for i, wi in enumerate(t.wi):
+        mirror = t.sensor.lookup(np.array([[-wi[0], -wi[1], wi[2]]]))[0]
+        nonzero = np.flatnonzero(t.brdf[i])
+        assert list(nonzero) == [mirror]
+        assert t.albedo[i] == pytest.approx(fresnel_conductor(wi[2], 0.2, 3.0), rel=1e-12)
+
+
+def test_white_interfaced_lambert_plane_returns_all_energy(simulate):
+    t = simulate(plane({"kind": "interfaced_lambert", "albedo": 1.0, "eta": 1.5}, [0.0, 70.0, 89.0], paths=50_000))
+    assert np.all(np.abs(t.albedo + t.truncated - 1.0) <= 1e-12)
+    assert np.all(t.truncated < 1e-6)
+
+
+def test_interfaced_lambert_at_eta_1_is_lambertian(simulate):
+    t = simulate(plane({"kind": "interfaced_lambert", "albedo": 0.6, "eta": 1.0}, [30.0]))
+    z = (t.brdf - 0.6 / np.pi) / t.brdf_stderr
+    assert np.max(np.abs(z)) <= 4.5
+
+
+def test_interfaced_lambert_diffuse_albedo_matches_the_flat_closed_form(simulate):
+    """Directional albedo of a smooth dielectric over a Lambertian body (interfaced_lambertian
+    _microfacets.txt, Eq. 8-10): F(mu_i) + (1 - F(mu_i)) K (1 - r_i) / (1 - K r_i), with r_i the
+    hemispherical reflectance of the interface seen from inside (quadrature here)."""
+    eta, kd = 1.5, 0.7
+    mu, w = np.polynomial.legendre.leggauss(400)
+    mu = 0.5 * (mu + 1)
+    r_inside = np.sum(w * 0.5 * 2 * mu * np.array([fresnel_dielectric(m, 1 / eta) for m in mu]))
+    t = simulate(plane({"kind": "interfaced_lambert", "albedo": kd, "eta": eta}, [0.0, 60.0], paths=400_000))
+    for i, wi in enumerate(t.wi):
+        f = fresnel_dielectric(wi[2], eta)
+        expected = f + (1 - f) * kd * (1 - r_inside) / (1 - kd * r_inside)
+        assert abs(t.albedo[i] - expected) <= 4 * t.albedo_stderr[i]
+
+
+def test_absorber_plane_returns_nothing(simulate):
+    t = simulate(plane({"kind": "absorber"}, [20.0], paths=1000))
+    assert t.albedo[0] == 0.0 and t.arrays["energy/absorbed"][0] == 1.0

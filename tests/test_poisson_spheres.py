@@ -1,0 +1,114 @@
+"""The Boolean sphere generator: density, void free path, tessellation budget, periodic images."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+import geometry
+from microsim import config
+from microsim.rng import geometry_rng
+
+SPHERES = geometry.SCENES["poisson_spheres"]
+
+
+def scene_config(**scene):
+    return config.validate({
+        "scene": {"kind": "poisson_spheres", **scene},
+        "material": {"kind": "lambert", "albedo": 0.8},
+        "illumination": {"theta_i_deg": [0.0]},
+        "run": {"paths": 1000},
+    })
+
+
+def realize(cfg, realization=0):
+    return SPHERES.generate(SPHERES.resolve(cfg), cfg, geometry_rng(1, realization))
+
+
+@pytest.mark.parametrize("phi", [0.05, 0.3, 0.6])
+def test_void_fraction_is_one_minus_phi(phi):
+    """A point is in the void when no centre lies within one radius: probability exp(-n 4/3 pi) = 1 - phi."""
+    cfg = scene_config(volume_fraction=phi, tile=16.0, depth=12.0)
+    rng = np.random.default_rng(0)
+    fractions = []
+    for r in range(8):
+        scene = realize(cfg, r)
+        centres = scene.shapes.params[:, :3]
+        points = rng.uniform((0, 0, -10.0), (16.0, 16.0, -2.0), size=(20_000, 3))
+        distance, _ = cKDTree(centres).query(points)
+        fractions.append(np.mean(distance > 1.0))
+    stderr = np.std(fractions, ddof=1) / math.sqrt(len(fractions))
+    assert abs(np.mean(fractions) - (1 - phi)) <= 4 * stderr
+
+
+def test_void_free_path_is_exponential_with_mean_l():
+    """Rays from random void points in random directions: chords of mean l = 4 / (-3 ln(1 - phi)).
+
+    The meshes are scaled to the sphere's area, so by Cauchy's formula their mean projected
+    area is pi and the mean free path is exactly l whatever the tessellation (randomly rotated).
+    """
+    phi = 0.3
+    cfg = scene_config(volume_fraction=phi, tile=24.0, depth=24.0, subdivisions=1)
+    l = 4.0 / (-3.0 * math.log(1 - phi))
+    rng = np.random.default_rng(1)
+    cap = 6.0  # rays start 6 radii inside the tile and slab, so distances are observed up to 6
+    estimates = []
+    for r in range(40):  # the mean chord of one realization scatters by ~6 %: average many
+        scene = realize(cfg, r)
+        centres = scene.shapes.params[:, :3]
+        points = rng.uniform((cap, cap, -24.0 + cap), (24.0 - cap, 24.0 - cap, -cap), size=(10_000, 3))
+        points = points[cKDTree(centres).query(points)[0] > scene.shapes.params[0, 4]]  # outside every mesh
+        d = rng.normal(size=points.shape)
+        d /= np.linalg.norm(d, axis=1)[:, None]
+        hit = scene.embree().run(points.astype(np.float32), d.astype(np.float32),
+                                 dists=np.full(len(points), cap, np.float32), output=1)
+        observed = hit["primID"] >= 0
+        # censored exponential: maximum likelihood = total observed length / number of hits
+        estimates.append(np.minimum(hit["tfar"], cap).sum() / observed.sum())
+    stderr = np.std(estimates, ddof=1) / math.sqrt(len(estimates))
+    assert abs(np.mean(estimates) - l) <= 4 * stderr
+    assert stderr < 0.02 * l  # resolves the 7.5 % bias an unscaled (inscribed) level-1 mesh would have
+
+
+@pytest.mark.parametrize("budget", [0.05, 0.01, 0.003])
+def test_tessellation_is_the_coarsest_within_the_mesh_error_budget(budget):
+    info = SPHERES.resolve(scene_config(volume_fraction=0.3, mesh_error=budget))
+    assert info["max_mesh_error"] <= budget
+    if info["subdivisions"] > 0:
+        assert SPHERES.unit_icosphere(info["subdivisions"] - 1)[3] > budget
+    # the recorded error is the true largest distance between mesh and sphere
+    vertices, faces, radius, error = SPHERES.unit_icosphere(info["subdivisions"])
+    assert np.allclose(np.linalg.norm(vertices, axis=1), radius)
+    centroids = vertices[faces].mean(axis=1)
+    assert error >= 1.0 - np.linalg.norm(centroids, axis=1).min() - 1e-12
+    assert error == pytest.approx(max(radius - 1.0, 1.0 - np.linalg.norm(centroids, axis=1).min()), rel=0.05)
+
+
+def test_every_sphere_reaching_into_the_tile_is_present():
+    cfg = scene_config(volume_fraction=0.3, tile=16.0, depth=6.0)
+    scene = realize(cfg)
+    centres = scene.shapes.params[:, :3]
+    reach = scene.shapes.params[0, 4]
+    originals = scene.info["spheres"]
+    assert len(centres) == originals + scene.info["sphere_images"]
+    # each periodic copy of an original that reaches into the tile is among the shapes
+    tree = cKDTree(centres)
+    for sx in (-1, 0, 1):
+        for sy in (-1, 0, 1):
+            shifted = centres[:originals] + [sx * 16.0, sy * 16.0, 0.0]
+            inside = np.all((shifted[:, :2] > -reach) & (shifted[:, :2] < 16.0 + reach), axis=1)
+            distance, _ = tree.query(shifted[inside])
+            assert np.all(distance < 1e-9)
+    assert scene.n_triangles == len(centres) * scene.info["triangles_per_sphere"]
+
+
+def test_defaults_follow_the_free_path_and_are_recorded():
+    dense, dilute = (SPHERES.resolve(scene_config(volume_fraction=phi)) for phi in (0.6, 0.05))
+    for info in (dense, dilute):
+        assert info["depth"] == pytest.approx(info["optical_depth"] * info["free_path"])
+        assert 16.0 <= info["tile"] <= 64.0
+    assert dilute["depth"] > dense["depth"] and dilute["tile"] > dense["tile"]
+    white = SPHERES.resolve(scene_config(volume_fraction=0.3).model_copy(
+        update={"material": config.Lambert(kind="lambert", albedo=1.0)}))
+    assert white["optical_depth"] == SPHERES.MAX_OPTICAL_DEPTH
