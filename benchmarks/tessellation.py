@@ -84,15 +84,18 @@ def main():
     OUT.mkdir(exist_ok=True)
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
     lv = np.array([r[0] for r in rows])
+    finest_albedo, finest_se = rows[-1][2], rows[-1][3]
     for j, t in enumerate(theta):
-        axes[0].errorbar(lv + 0.05 * j, [r[2][j] for r in rows], yerr=[r[3][j] for r in rows], marker="o",
-                         capsize=3, label=f"theta_i = {t:g} deg")
-        axes[1].plot(lv, [r[4][j] for r in rows], marker="o", label=f"theta_i = {t:g} deg")
+        axes[0].errorbar(lv[:-1] + 0.05 * j, [r[2][j] - finest_albedo[j] for r in rows[:-1]],
+                         yerr=[np.hypot(r[3][j], finest_se[j]) for r in rows[:-1]], marker="o", capsize=3,
+                         label=f"theta_i = {t:g} deg")
+        axes[1].plot(lv[:-1], [r[4][j] for r in rows[:-1]], marker="o", label=f"theta_i = {t:g} deg")
     for ax in axes[:2]:
         ax.axvline(default_level, color="grey", ls="--", lw=1)
         ax.set_xlabel("icosphere level (triangles per sphere 20 * 4^level)")
         ax.legend(fontsize=8)
-    axes[0].set_ylabel("directional albedo")
+    axes[0].axhline(0.0, color="k", lw=0.8)
+    axes[0].set_ylabel(f"albedo - albedo at level {args.finest} (+- combined se)")
     axes[0].set_title("albedo vs tessellation (phi = 0.3, c = 0.8)")
     axes[1].axhline(1.0, color="k", lw=0.8)
     axes[1].set_ylabel("mean chi-square per cell vs finest")

@@ -1,5 +1,9 @@
 """Boolean model of spheres (CONVENTIONS 5.2): Poisson centres in the slab -depth <= z < 0.
 
+The optional ``[base]`` plane lies under every sphere, at the lowest point any mesh can reach
+(z = -depth - vertex radius): spheres rest above it and never cut it, so no hit point can be
+projected to its far side.
+
 Spheres of radius r = 1 may overlap. Volume fraction phi = 1 - exp(-n 4/3 pi), so the number
 density is n = -ln(1 - phi) / (4/3 pi) and the free path in the void is exponential with mean
 l = 1 / (n pi) = 4 / (-3 ln(1 - phi)).
@@ -163,6 +167,7 @@ def resolve(config) -> dict:
         "max_mesh_error": error,
         "expected_spheres": n * tile * tile * depth,
         "base": config.base.kind if config.base is not None else "none",
+        "base_z": -depth - vertex_radius,
         "z_top": vertex_radius + 1e-3,
         "z_bottom": -depth - vertex_radius - 1e-3,
     }
@@ -200,15 +205,14 @@ def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
     vertices = vertices.reshape(-1, 3)
     faces = faces.reshape(-1, 3)
     specs = [config.material.model_dump()]
-    z_bottom = resolved["z_bottom"]
     if config.base is not None:
-        base_v, base_f = base_quad(tile, -depth)
+        base_v, base_f = base_quad(tile, resolved["base_z"])
         faces = np.concatenate([faces, base_f + len(vertices)])
         vertices = np.concatenate([vertices, base_v])
         face_shape = np.concatenate([face_shape, np.full(2, n_all, np.int32)])
-        shapes = Shapes.concatenate([shapes, Shapes.planes(np.array([[0.0, 0.0, -depth]]),
+        shapes = Shapes.concatenate([shapes, Shapes.planes(np.array([[0.0, 0.0, resolved["base_z"]]]),
                                                            np.array([[0.0, 0.0, 1.0]]), material=1, size=tile)])
         specs.append(config.base.model_dump())
     info = dict(resolved, spheres=int(count), sphere_images=int(n_all - count), triangles=int(len(faces)))
     return Scene(vertices, faces, face_shape, shapes, MaterialTable.from_specs(specs),
-                 tile, resolved["z_top"], z_bottom, info)
+                 tile, resolved["z_top"], resolved["z_bottom"], info)

@@ -9,7 +9,7 @@ import math
 import numba
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def fresnel_dielectric(cos_i, eta):
     """Reflectance of a smooth dielectric interface, exact unpolarised form.
 
@@ -27,7 +27,7 @@ def fresnel_dielectric(cos_i, eta):
     return 0.5 * a * a * (1.0 + b * b)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def fresnel_conductor(cos_i, eta, k):
     """Reflectance of a smooth conductor with complex relative index ``eta + i k``.
 

@@ -55,7 +55,7 @@ def material_row(spec: dict) -> tuple[int, np.ndarray]:
     return code, row
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def orthonormal_basis(nx, ny, nz):
     """Two tangents completing the unit normal n (Duff et al. 2017, branchless)."""
     sign = 1.0 if nz >= 0.0 else -1.0
@@ -64,16 +64,17 @@ def orthonormal_basis(nx, ny, nz):
     return (1.0 + sign * nx * nx * a, sign * b, -sign * nx), (b, sign + ny * ny * a, -ny)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def sample_cosine(states, i, nx, ny, nz):
-    """Direction about the normal n with density cos(theta) / pi."""
-    u1 = uniform(states, i)
-    u2 = uniform(states, i)
-    r = math.sqrt(u1)
-    phi = 2.0 * math.pi * u2
-    a = r * math.cos(phi)
-    b = r * math.sin(phi)
-    c = math.sqrt(max(0.0, 1.0 - u1))
+    """Direction about the normal n with density cos(theta) / pi (Malley: a uniform point of the
+    unit disk, by rejection from its square, lifted onto the hemisphere; no trigonometry)."""
+    while True:
+        a = 2.0 * uniform(states, i) - 1.0
+        b = 2.0 * uniform(states, i) - 1.0
+        r2 = a * a + b * b
+        if r2 < 1.0:
+            break
+    c = math.sqrt(1.0 - r2)
     t, s = orthonormal_basis(nx, ny, nz)
     return (
         a * t[0] + b * s[0] + c * nx,
@@ -82,14 +83,14 @@ def sample_cosine(states, i, nx, ny, nz):
     )
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def reflect(dx, dy, dz, nx, ny, nz):
     """Mirror direction of the propagation direction d about n."""
     c = 2.0 * (dx * nx + dy * ny + dz * nz)
     return dx - c * nx, dy - c * ny, dz - c * nz
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def scatter(kind, prm, states, i, dx, dy, dz, nx, ny, nz):
     """One interaction: returns (new direction, weight factor, truncated weight fraction).
 
@@ -108,7 +109,7 @@ def scatter(kind, prm, states, i, dx, dy, dz, nx, ny, nz):
     return dx, dy, dz, 0.0, 0.0
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _interfaced_lambert(albedo, eta, states, i, dx, dy, dz, nx, ny, nz):
     """Smooth dielectric over a Lambertian body, sampled bounce by bounce (see module doc)."""
     cos_i = -(dx * nx + dy * ny + dz * nz)

@@ -19,7 +19,7 @@ _S11 = np.uint64(11)
 _INV53 = 1.0 / 9007199254740992.0  # 2^-53
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def mix64(z):
     """SplitMix64 finaliser: a bijective avalanche of a uint64."""
     z = (z ^ (z >> _S30)) * _M1
@@ -27,7 +27,7 @@ def mix64(z):
     return z ^ (z >> _S31)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def stream_key(seed, realization, incidence):
     """Key of the stream of one (seed, realization, incidence) unit of work."""
     k = mix64(np.uint64(seed) + _GAMMA)
@@ -35,13 +35,13 @@ def stream_key(seed, realization, incidence):
     return mix64(k ^ (np.uint64(incidence) * _M1 + _GAMMA))
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def path_state(key, path):
     """Initial state of path number ``path`` of the stream ``key``."""
     return mix64(key ^ mix64(np.uint64(path) + _GAMMA))
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def uniform(states, i):
     """Next uniform double in [0, 1) of path ``i``; advances ``states[i]``."""
     s = states[i] + _GAMMA

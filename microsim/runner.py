@@ -26,7 +26,8 @@ import numpy as np
 import geometry
 
 from .integrator import (
-    ABSORBED, INSIDE_HITS, ORDERS, ROULETTE_KILLS, SEGMENTS, TRANSMITTED, TRUNCATED, PathState, trace_batch,
+    ABSORBED, INSIDE_HITS, ORDERS, ROULETTE_KILLS, SEGMENTS, TRANSMITTED, TRUNCATED, PathState, compile_kernels,
+    trace_batch,
 )
 from .rng import geometry_rng, stream_key
 from .sensor import Sensor
@@ -211,6 +212,7 @@ def run(config, workers: int = 1, progress=None) -> Result:
     if len(blocks) <= 1:
         trace_units(plan, plan.units, collect)
     else:
+        compile_kernels(sensor)
         context = multiprocessing.get_context("fork")
         q = context.Queue()
         with ProcessPoolExecutor(len(blocks), mp_context=context, initializer=_init_worker, initargs=(q,)) as pool:

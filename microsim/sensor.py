@@ -149,7 +149,7 @@ class Sensor:
         return np.sum(values * weight, axis=1)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def cell_index(x, y, z, ring_counts, ring_start, ring_of):
     """Cell of the direction (x, y, z), z > 0: O(1) (see module docstring)."""
     n = ring_start[-1]

@@ -84,7 +84,7 @@ class Shapes:
         )
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def surface_point(kind, prm, x, y, z):
     """Project the hit (x, y, z) onto the analytic shape; return the point and unit normal."""
     if kind == SPHERE:
