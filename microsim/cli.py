@@ -64,6 +64,80 @@ def run(config_path, out, workers, paths, seed, force):
     click.echo(f"table written to {out}")
 
 
+@cli.command()
+@click.argument("table_path", metavar="TABLE.h5", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--model", "model_name", required=True, help="analytic model (see `microsim models`)")
+@click.option("--param", "params", multiple=True, metavar="KEY=VALUE", help="model parameter, repeatable")
+@click.option("--order", type=click.Choice(["all", "1", "2", "3", "4+"]), default="all", show_default=True,
+              help="compare with one scattering order of the table")
+@click.option("--json", "as_json", is_flag=True, help="print one JSON object")
+@click.option("--plot", "plot_dir", type=click.Path(file_okay=False, path_type=Path),
+              help="write PNG figures (polar maps, plane of incidence) into this directory")
+def compare(table_path, model_name, params, order, as_json, plot_dir):
+    """Average a model over the cells of TABLE.h5 and report how far it is from the simulation."""
+    import json
+
+    from . import compare as compare_module
+    from . import models, tables
+
+    values = {}
+    for item in params:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise BadInput(f"--param {item!r}: expected KEY=VALUE")
+        values[key.strip()] = value.strip()
+    try:
+        model = models.create(model_name, **values)
+    except ValueError as err:
+        raise BadInput(f"--model {model_name}: {err}" if "unknown model" not in str(err) else f"--model: {err}") from None
+    try:
+        table = tables.load(table_path)
+    except FileNotFoundError:
+        raise BadInput(f"TABLE.h5: {table_path} not found") from None
+    except (OSError, KeyError) as err:
+        raise BadInput(f"TABLE.h5: {table_path} is not a microsim table ({err})") from None
+    result = compare_module.compare(table, model, order)
+    if plot_dir is not None:
+        written = plots_module().write_all(result, table.sensor, plot_dir)
+    if as_json:
+        click.echo(json.dumps(result.as_dict()))
+    else:
+        click.echo(f"{model!r} vs {table_path} (order {order}; cells with signal: table > "
+                   f"{compare_module.SIGNAL_TO_NOISE:g} standard errors)")
+        click.echo(f"{'theta_i':>8} {'cells':>6} {'med|rel|':>9} {'rel rmse':>9} {'max|z|':>8} "
+                   f"{'albedo model':>13} {'albedo sim':>16}")
+        for row in result.as_dict()["per_incidence"]:
+            click.echo(f"{row['theta_i_deg']:8.1f} {row['cells_with_signal']:6d} {row['median_abs_rel_err']:9.4f} "
+                       f"{row['rel_rmse']:9.4f} {row['max_abs_z']:8.2f} {row['albedo_model']:13.4f} "
+                       f"{row['albedo_sim']:9.4f}+-{row['albedo_sim_stderr']:.4f}")
+        o = result.as_dict()["overall"]
+        click.echo(f"{'overall':>8} {o['cells_with_signal']:6d} {o['median_abs_rel_err']:9.4f} {o['rel_rmse']:9.4f} "
+                   f"{o['max_abs_z']:8.2f}")
+    if plot_dir is not None and not as_json:
+        click.echo(f"{len(written)} figures written to {plot_dir}")
+
+
+def plots_module():
+    from . import plots
+
+    return plots
+
+
+@cli.command("models")
+def list_models():
+    """List the analytic models, their parameters with accepted values, and their references."""
+    from . import models
+
+    for name in models.available():
+        cls = models.get(name)
+        click.echo(f"{name}: {cls.reference}")
+        if not cls.reciprocal:
+            click.echo(f"    (not reciprocal: {cls.nonreciprocal_reason})")
+        for p in cls.params:
+            default = "no default" if p.default is None else f"default {p.default}"
+            click.echo(f"    {p.name:<14} {p.describe():<30} {default:<16} {p.doc}")
+
+
 def _check_writable(out: Path, force: bool) -> None:
     if out.exists() and not force:
         raise BadInput(f"--out: {out} exists; pass --force to overwrite it")

@@ -1,0 +1,108 @@
+"""`microsim compare` and `microsim models` (issue 3, acceptance e and f)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from microsim import models
+from microsim.cli import main
+from microsim.compare import cell_averages
+from microsim.sensor import Sensor
+
+
+@pytest.fixture(scope="module")
+def plane_table(tmp_path_factory):
+    from microsim import config, runner, tables
+
+    cfg = config.validate({
+        "scene": {"kind": "plane"},
+        "material": {"kind": "lambert", "albedo": 0.5},
+        "illumination": {"theta_i_deg": [0.0, 50.0]},
+        "sensor": {"cells": 200},
+        "run": {"paths": 4_000_000, "realizations": 64, "seed": 9},
+    })
+    path = tmp_path_factory.mktemp("compare") / "plane.h5"
+    tables.write(path, runner.run(cfg), cfg)
+    return path
+
+
+def compare_json(capsys, *argv):
+    assert main(["compare", *map(str, argv), "--json"]) == 0
+    out = capsys.readouterr().out.strip().splitlines()
+    assert len(out) == 1
+    return json.loads(out[0])
+
+
+def test_true_albedo_agrees_within_one_percent(plane_table, capsys):
+    result = compare_json(capsys, plane_table, "--model", "lambert", "--param", "albedo=0.5")
+    assert result["model"] == "lambert" and len(result["per_incidence"]) == 2
+    assert set(result["overall"]) >= {"median_abs_rel_err", "rel_rmse", "max_abs_z", "albedo_model", "albedo_sim"}
+    assert result["overall"]["median_abs_rel_err"] <= 0.01
+    assert result["overall"]["cells_with_signal"] == 2 * Sensor.build(200).n_cells
+    assert result["overall"]["max_abs_z"] < 4.5
+
+
+def test_ten_percent_wrong_albedo_shows_ten_percent(plane_table, capsys):
+    result = compare_json(capsys, plane_table, "--model", "lambert", "--param", "albedo=0.55")
+    assert abs(result["overall"]["median_abs_rel_err"] - 0.10) <= 0.005
+    for row in result["per_incidence"]:
+        assert row["albedo_model"] == pytest.approx(0.55, rel=1e-12)
+        assert row["albedo_sim"] == pytest.approx(0.5, abs=1e-12)
+
+
+def test_plots_are_written_per_incidence(plane_table, tmp_path, capsys):
+    assert main(["compare", str(plane_table), "--model", "lambert", "--param", "albedo=0.5",
+                 "--plot", str(tmp_path / "figs")]) == 0
+    figures = sorted((tmp_path / "figs").glob("*.png"))
+    assert len(figures) == 4  # polar maps and plane of incidence, for 2 incidences
+    for f in figures:
+        assert f.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and f.stat().st_size > 10_000
+    assert "figures written" in capsys.readouterr().out
+
+
+def test_cell_average_matches_a_dense_cos_weighted_integral():
+    sensor = Sensor.build(60)
+    model = models.create("oren_nayar", albedo=0.8, roughness=0.6)
+    wi = np.array([np.sin(1.1), 0.0, np.cos(1.1)])
+    averaged, change = cell_averages(model, sensor, wi, np.full(sensor.n_cells, 1e-4))
+    w, weight = sensor.cell_quadrature(48, 48)
+    dense = np.sum(model(np.broadcast_to(wi, w.shape), w) * weight, axis=1)
+    assert np.max(np.abs(averaged - dense)) < 2e-5
+    assert change <= 0.05
+
+
+def test_models_lists_every_model(capsys):
+    assert main(["models"]) == 0
+    out = capsys.readouterr().out
+    names = {line.split(":")[0] for line in out.splitlines() if not line.startswith(" ")}
+    assert names == set(models.available())
+    assert {"lambert", "oren_nayar", "lambert_sphere", "lambert_sphere_fast", "vmf_diffuse", "microfacet",
+            "interfaced_lambert", "micrograin", "micrograin_smith"} <= names
+    for name in models.available():
+        for p in models.get(name).params:
+            assert p.describe() in out
+
+
+@pytest.mark.parametrize("argv, key", [
+    (["--model", "lambert", "--param", "albedo=2"], "albedo"),
+    (["--model", "lambert", "--param", "albedo=dark"], "albedo"),
+    (["--model", "lambert", "--param", "colour=1"], "colour"),
+    (["--model", "lambert", "--param", "albedo"], "--param"),
+    (["--model", "no_such_model"], "no_such_model"),
+    (["--model", "oren_nayar", "--param", "albedo=0.5", "--param", "roughness=2"], "roughness"),
+    (["--model", "lambert", "--param", "albedo=0.5", "--order", "7"], "--order"),
+])
+def test_bad_compare_input_gives_one_line_and_exit_2(plane_table, argv, key, capsys):
+    assert main(["compare", str(plane_table), *argv]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and key in lines[0] and "Traceback" not in captured.err and captured.out == ""
+
+
+def test_compare_on_a_missing_or_foreign_file(tmp_path, capsys):
+    foreign = tmp_path / "foreign.h5"
+    foreign.write_bytes(b"not hdf5")
+    for path in (tmp_path / "missing.h5", foreign):
+        assert main(["compare", str(path), "--model", "lambert", "--param", "albedo=0.5"]) == 2
+        assert len(capsys.readouterr().err.strip().splitlines()) == 1
