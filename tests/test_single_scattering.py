@@ -8,11 +8,12 @@ opposition effect of finite particles) adds light.
 
 Finite particles also shift the rest of the BRDF: a hit point sits up to one radius above its
 sphere's centre, so it is less attenuated than a point scatterer at the centre's depth; the
-excess over radiative transfer grows linearly with r / l (measured: +1.1 % at phi = 0.005,
-+2.4 % at 0.01, +4.2 % at 0.02, +9.5 % at 0.04, median over cells; an independent brute-force
-tracer on exact spheres gives the same excess, see benchmarks/dilute_limit.py). The 3 % check
-is therefore made where the suspension is dilute enough for radiative transfer to hold to
-that accuracy, phi = 0.005 (l = 266 radii).
+excess over radiative transfer grows linearly with r / l = -3/4 ln(1 - phi) (median over cells,
+theta_i = 0, 30, 60 deg: +0.9 to +1.8 % at phi = 0.005, +4.4 to +5.0 % at 0.02, +7.9 to +9.3 %
+at 0.04; fit 0.005 + 2.5 r / l), and an independent brute-force tracer on exact spheres gives
+the same excess at phi = 0.02 (+4.6 to +5.9 %): benchmarks/dilute_limit.py. The 3 % check is
+therefore made where the suspension is dilute enough for radiative transfer to hold to that
+accuracy, phi = 0.005 (l = 266 radii).
 """
 
 import numpy as np

@@ -1,0 +1,49 @@
+"""Analytic shapes: hits are projected onto the exact surface and get its exact normal."""
+
+import numpy as np
+import pytest
+
+from microsim.shapes import ELLIPSOID, PLANE, SPHERE, Shapes, surface_point
+
+
+def project(shapes, k, points):
+    out = np.array([surface_point(shapes.kind[k], shapes.params[k], *p) for p in points])
+    return out[:, :3], out[:, 3:]
+
+
+@pytest.fixture
+def points():
+    rng = np.random.default_rng(0)
+    return rng.normal(size=(500, 3)) * 2.0 + [1.0, -2.0, 0.5]
+
+
+def test_sphere_projection_lies_on_the_projection_radius_with_the_radial_normal(points):
+    shapes = Shapes.spheres(np.array([[1.0, -2.0, 0.5]]), 1.0, 1.01, material=0)
+    assert shapes.kind[0] == SPHERE
+    p, n = project(shapes, 0, points)
+    radial = p - [1.0, -2.0, 0.5]
+    assert np.allclose(np.linalg.norm(radial, axis=1), 1.01, rtol=1e-14)
+    assert np.allclose(n, radial / 1.01, atol=1e-14)
+
+
+def test_plane_projection_drops_the_point_along_the_normal(points):
+    normal = np.array([[0.3, -0.2, 0.9]])
+    shapes = Shapes.planes(np.array([[0.0, 0.0, -1.0]]), normal, material=1, size=10.0)
+    assert shapes.kind[0] == PLANE
+    p, n = project(shapes, 0, points)
+    unit = normal[0] / np.linalg.norm(normal)
+    assert np.allclose((p - [0.0, 0.0, -1.0]) @ unit, 0.0, atol=1e-13)
+    assert np.allclose(np.cross(p - points, unit), 0.0, atol=1e-13)  # moved along the normal only
+    assert np.allclose(n, unit)
+
+
+def test_ellipsoid_projection_lies_on_the_scaled_surface_with_the_gradient_normal(points):
+    centre, axes = np.array([1.0, -2.0, 0.5]), np.array([2.0, 0.5, 1.0])
+    shapes = Shapes.ellipsoids(centre[None], axes[None], 1.02, material=0)
+    assert shapes.kind[0] == ELLIPSOID
+    p, n = project(shapes, 0, points)
+    u = (p - centre) / axes
+    assert np.allclose(np.linalg.norm(u, axis=1), 1.02, rtol=1e-13)
+    gradient = (p - centre) / axes**2
+    assert np.allclose(n, gradient / np.linalg.norm(gradient, axis=1)[:, None], atol=1e-13)
+    assert np.allclose(np.linalg.norm(n, axis=1), 1.0)
