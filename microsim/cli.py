@@ -98,7 +98,9 @@ def compare(table_path, model_name, params, order, as_json, plot_dir):
         raise BadInput(f"TABLE.h5: {table_path} is not a microsim table ({err})") from None
     result = compare_module.compare(table, model, order)
     if plot_dir is not None:
-        written = plots_module().write_all(result, table.sensor, plot_dir)
+        from . import plots
+
+        written = plots.write_all(result, table.sensor, plot_dir)
     if as_json:
         click.echo(json.dumps(result.as_dict()))
     else:
@@ -115,12 +117,6 @@ def compare(table_path, model_name, params, order, as_json, plot_dir):
                    f"{o['max_abs_z']:8.2f}")
     if plot_dir is not None and not as_json:
         click.echo(f"{len(written)} figures written to {plot_dir}")
-
-
-def plots_module():
-    from . import plots
-
-    return plots
 
 
 @cli.command("models")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+import types
 import typing
 from pathlib import Path
 from typing import Annotated, Literal, Union
@@ -117,50 +118,46 @@ def validate(data: dict) -> Config:
 
 def describe_error(error: dict, data: dict) -> str:
     """One line for one pydantic error: the dotted key, the value given, what is accepted."""
-    model, keys, value = Config, [], data
+    node, owner, keys, value = Config, None, [], data
     for part in error["loc"]:
         if isinstance(part, int):
             keys[-1] += f"[{part}]"
             value = value[part] if isinstance(value, list) and part < len(value) else None
             continue
-        field = _field(model, part)
-        if field is None and model is not None and _tagged_member(model, part) is not None:
-            model = _tagged_member(model, part)  # discriminator tag in the error path
+        member = _tagged_member(node, part)
+        if member is not None:  # a discriminator tag in the error path: step into that kind
+            node = member
             continue
         keys.append(part)
         value = value.get(part) if isinstance(value, dict) else None
-        model = field
+        owner, node = node, _field(node, part)
     key = ".".join(keys) or "config"
     kind = error["type"]
     shown = f" = {value!r}" if value is not None and not isinstance(value, dict) else ""
     if kind == "extra_forbidden":
-        parent = _owner(Config, error["loc"][:-1], data)
-        allowed = ", ".join(parent.model_fields) if parent is not None else ""
-        return f"{key}: unknown key; allowed keys here: {allowed}"
+        return f"{key}: unknown key; allowed keys here: {', '.join(owner.model_fields)}"
     if kind == "missing":
-        return f"{key}: missing; {_accepted(model, error)}"
+        return f"{key}: missing; {_accepted(node, error)}"
     if kind in ("union_tag_invalid", "union_tag_not_found"):
-        tags = ", ".join(repr(typing.get_args(m.model_fields["kind"].annotation)[0]) for m in _union_members(model))
+        tags = ", ".join(repr(_kind_of(m)) for m in _union_members(node))
         given = value.get("kind") if isinstance(value, dict) else None
         if given is None:
             return f"{key}.kind: missing; accepted: {tags}"
         return f"{key}.kind = {given!r}: unknown kind; accepted: {tags}"
     problem = "out of range" if kind in _RANGE_ERRORS else error["msg"].lower()
-    return f"{key}{shown}: {problem}; {_accepted(model, error)}"
+    return f"{key}{shown}: {problem}; {_accepted(node, error)}"
 
 
 _RANGE_ERRORS = {"greater_than", "greater_than_equal", "less_than", "less_than_equal", "too_short", "too_long"}
 
 
 def _field(model, name):
-    """The annotation of field ``name`` of ``model``: a model class, a tagged union, or a FieldInfo."""
+    """What field ``name`` of a model class holds: a model class, a tagged union, a list or a FieldInfo."""
     if not (isinstance(model, type) and issubclass(model, BaseModel)) or name not in model.model_fields:
         return None
     info = model.model_fields[name]
     inner = _unwrap(info.annotation)
-    if isinstance(inner, type) and issubclass(inner, BaseModel):
-        return inner
-    if _union_members(inner):
+    if (isinstance(inner, type) and issubclass(inner, BaseModel)) or _union_members(inner):
         return inner
     if typing.get_origin(inner) is list:
         (item,) = typing.get_args(inner)
@@ -176,8 +173,9 @@ class _ItemField:
 
 
 def _unwrap(annotation):
+    """The type inside Optional[...] and Annotated[...]."""
     args = typing.get_args(annotation)
-    if typing.get_origin(annotation) in (Union, getattr(__import__("types"), "UnionType", Union)):
+    if typing.get_origin(annotation) in (Union, types.UnionType):
         non_none = [a for a in args if a is not type(None)]
         if len(non_none) == 1:
             return _unwrap(non_none[0])
@@ -187,6 +185,7 @@ def _unwrap(annotation):
 
 
 def _union_members(annotation) -> list:
+    """The section models of a union discriminated by ``kind`` (else an empty list)."""
     if typing.get_origin(annotation) is Annotated:
         annotation = typing.get_args(annotation)[0]
     if typing.get_origin(annotation) is Union:
@@ -195,49 +194,33 @@ def _union_members(annotation) -> list:
     return []
 
 
+def _kind_of(member) -> str:
+    return typing.get_args(member.model_fields["kind"].annotation)[0]
+
+
 def _tagged_member(union, tag):
     for member in _union_members(union):
-        if typing.get_args(member.model_fields["kind"].annotation) == (tag,):
+        if _kind_of(member) == tag:
             return member
     return None
-
-
-def _owner(model, loc, data):
-    """The model class that owns the last key of ``loc`` (to list its allowed keys)."""
-    current = model
-    for part in loc:
-        if isinstance(part, int):
-            continue
-        nxt = _field(current, part)
-        if nxt is None:
-            nxt = _tagged_member(current, part)
-        if isinstance(nxt, type) and issubclass(nxt, BaseModel):
-            current = nxt
-        elif _union_members(nxt):
-            current = nxt
-        else:
-            return None
-    return current if isinstance(current, type) else None
 
 
 def _accepted(field, error) -> str:
     """What a field accepts, from its type and its numeric bounds."""
     if isinstance(field, _ItemField):
         if isinstance(error["loc"][-1], int):
-            return "accepted: a number in " + _range(typing.get_args(field.item)[1:], "")
-        return "accepted: a list of numbers, each in " + _range(typing.get_args(field.item)[1:], "") + _length(field.info)
+            return "accepted: a number in " + _range(typing.get_args(field.item)[1:])
+        return "accepted: a list of numbers, each in " + _range(typing.get_args(field.item)[1:]) + _length(field.info)
     if isinstance(field, type) and issubclass(field, BaseModel):
         return "accepted: a table with keys " + ", ".join(field.model_fields)
     if _union_members(field):
-        return "accepted: a table with a kind among " + ", ".join(
-            typing.get_args(m.model_fields["kind"].annotation)[0] for m in _union_members(field)
-        )
+        return "accepted: a table with a kind among " + ", ".join(_kind_of(m) for m in _union_members(field))
     if field is None:
         return ""
     kind = _unwrap(field.annotation)
     if kind is float or kind is int:
         what = "an integer" if kind is int else "a number"
-        return f"accepted: {what} in {_range(field.metadata, '')}"
+        return f"accepted: {what} in {_range(field.metadata)}"
     if kind is str:
         return "accepted: a string"
     if typing.get_origin(kind) is Literal:
@@ -245,7 +228,8 @@ def _accepted(field, error) -> str:
     return f"accepted: {getattr(kind, '__name__', kind)}"
 
 
-def _range(metadata, _) -> str:
+def _range(metadata) -> str:
+    """Interval notation of the numeric bounds in a field's metadata."""
     lo, hi, lo_open, hi_open = -math.inf, math.inf, False, False
     for m in metadata:
         if isinstance(m, annotated_types.Gt):
@@ -257,7 +241,7 @@ def _range(metadata, _) -> str:
         elif isinstance(m, annotated_types.Le):
             hi, hi_open = m.le, False
         elif hasattr(m, "metadata"):
-            return _range(m.metadata, _)
+            return _range(m.metadata)
     left = "(" if lo_open or math.isinf(lo) else "["
     right = ")" if hi_open or math.isinf(hi) else "]"
     return f"{left}{lo:g}, {hi:g}{right}"

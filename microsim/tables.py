@@ -14,7 +14,8 @@ Layout (required by CONVENTIONS 6, plus extras marked +):
     energy/transmitted, energy/truncated, + energy/absorbed, + */..._stderr (n_i,)
     + energy/balance: albedo + transmitted + truncated + absorbed, 1 in expectation
     paths (n_i,)
-    scene/ attrs: resolved scene parameters; + scene/<per-realization counts> (R,)
+    scene/ attrs: resolved scene parameters, largest triangle count;
+    + scene/<count> (R,): what each realization generated (spheres, images, triangles, ...)
     + diagnostics/segments, inside_hits, roulette_kills (n_i,)
 
 The file is written under a temporary name in the same directory and renamed when complete.
@@ -104,9 +105,8 @@ def write(path: str | Path, result, config) -> Path:
             for key, value in plan.scene.items():
                 scene.attrs[key] = value
             infos = [result.scene_info[r] for r in sorted(result.scene_info)]
-            for key in ("spheres", "sphere_images", "grains", "triangles"):
-                if infos and key in infos[0]:
-                    scene[key] = np.array([info[key] for info in infos])
+            for key in infos[0].keys() - plan.scene.keys():  # what varies between realizations
+                scene[key] = np.array([info[key] for info in infos])
             scene.attrs["triangles"] = max(info["triangles"] for info in infos)
         os.replace(tmp, path)
     finally:
