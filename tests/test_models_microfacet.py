@@ -37,6 +37,20 @@ def _normal_from_slopes(px, py):
     return m / np.linalg.norm(m, axis=-1, keepdims=True)
 
 
+def _slope_space_rule(distribution, ax, ay, n_beta, n_psi):
+    """Normals m and solid-angle weights d_omega on a polar grid of scaled slopes (tan beta, psi).
+
+    d_omega = m_z^3 sx sy rho / cos^2(beta) d_beta d_psi: the slope-space Jacobian (dm = m_z^3 d slope).
+    """
+    sx, sy = _slope_scales(distribution, ax, ay)
+    beta, wb = _gl(n_beta, 0.0, 0.5 * math.pi)
+    psi = (np.arange(n_psi) + 0.5) * 2.0 * math.pi / n_psi
+    b, p = np.meshgrid(beta, psi, indexing="ij")
+    rho = np.tan(b)
+    m = _normal_from_slopes(sx * rho * np.cos(p), sy * rho * np.sin(p))
+    return m, m[..., 2] ** 3 * sx * sy * rho / np.cos(b) ** 2 * wb[:, None] * 2.0 * math.pi / n_psi
+
+
 def projected_area_integral(distribution, ax, ay, n_tilt=400, n_azimuth=512):
     """integral D(m) (m.n) d(omega_m) = integral P22(p) d^2 p, P22 = D cos^4(theta_m).
 
@@ -167,13 +181,8 @@ def test_sample_has_density_d_cos(distribution, ax, ay):
     x, w = _gl(128, 0.0, 1.0)
     m = nd.sample(distribution, ax, ay, x[:, None], x[None, :])
     weight = w[:, None] * w[None, :]
-    sx, sy = _slope_scales(distribution, ax, ay)
-    beta, wb = _gl(400, 0.0, 0.5 * math.pi)
-    psi = (np.arange(1024) + 0.5) * 2.0 * math.pi / 1024
-    b, p = np.meshgrid(beta, psi, indexing="ij")
-    rho = np.tan(b)
-    mm = _normal_from_slopes(sx * rho * np.cos(p), sy * rho * np.sin(p))
-    dens = nd.ndf(distribution, ax, ay, mm) * mm[..., 2] ** 4 * sx * sy * rho / np.cos(b) ** 2 * wb[:, None] * 2.0 * math.pi / 1024
+    mm, d_omega = _slope_space_rule(distribution, ax, ay, 400, 1024)
+    dens = nd.ndf(distribution, ax, ay, mm) * mm[..., 2] * d_omega
     for g in (lambda v: v[..., 2], lambda v: v[..., 0] ** 2, lambda v: v[..., 1] ** 2, lambda v: v[..., 0] * v[..., 1]):
         assert np.sum(g(m) * weight) == pytest.approx(np.sum(g(mm) * dens), abs=1e-5)
     assert np.allclose(np.linalg.norm(m, axis=-1), 1.0) and np.all(m[..., 2] > 0.0)
@@ -225,13 +234,8 @@ def test_vcavity_masking_is_normalised(distribution, ax, ay):
     """integral D(m) G1_V(i, m) <i.m> dm = mu_i for the Torrance-Sparrow masking (Eq. 14 with o = i),
     so G_TS <= G1_V bounds its white-furnace albedo by 1 exactly (the facet-space furnace test
     above only resolves it to its quadrature error at grazing incidence)."""
-    sx, sy = _slope_scales(distribution, ax, ay)
-    beta, wb = _gl(200, 0.0, 0.5 * math.pi)
-    psi = (np.arange(256) + 0.5) * 2.0 * math.pi / 256
-    b, p = np.meshgrid(beta, psi, indexing="ij")
-    rho = np.tan(b)
-    m = _normal_from_slopes(sx * rho * np.cos(p), sy * rho * np.sin(p))
-    dens = nd.ndf(distribution, ax, ay, m) * m[..., 2] ** 3 * sx * sy * rho / np.cos(b) ** 2 * wb[:, None] * 2.0 * math.pi / 256
+    m, d_omega = _slope_space_rule(distribution, ax, ay, 200, 256)
+    dens = nd.ndf(distribution, ax, ay, m) * d_omega
     for theta in np.radians([0.0, 30.0, 60.0, 85.0, 89.9]):
         wi = direction(theta, 0.3)
         wb_i = np.broadcast_to(wi, m.shape)
