@@ -110,10 +110,7 @@ class Sensor:
     def lookup(self, w: np.ndarray) -> np.ndarray:
         """Cell index of each direction of ``w`` (M, 3) with w.z > 0."""
         w = np.ascontiguousarray(w, dtype=np.float64).reshape(-1, 3)
-        out = np.empty(w.shape[0], dtype=np.int64)
-        for i in range(w.shape[0]):
-            out[i] = cell_index(w[i, 0], w[i, 1], w[i, 2], self.ring_counts, self.ring_start, self.ring_of)
-        return out
+        return _cell_indices(w, self.ring_counts, self.ring_start, self.ring_of)
 
     def cell_quadrature(self, n_theta: int = 4, n_phi: int = 4):
         """Nodes and weights averaging a function over each cell with the cos(theta) weight.
@@ -167,3 +164,11 @@ def cell_index(x, y, z, ring_counts, ring_start, ring_of):
     if j >= count:
         j -= count
     return ring_start[k] + j
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _cell_indices(w, ring_counts, ring_start, ring_of):
+    out = np.empty(w.shape[0], dtype=np.int64)
+    for i in range(w.shape[0]):
+        out[i] = cell_index(w[i, 0], w[i, 1], w[i, 2], ring_counts, ring_start, ring_of)
+    return out
