@@ -190,7 +190,7 @@ def main():
               + f"   {time.perf_counter() - start:.0f} s")
     start = time.perf_counter()
     brute = brute_force_excess(0.02, theta, args.brute_rays, 8, 100)
-    print(f"brute force on exact spheres, phi = 0.02: " + "  ".join(f"{e:+.4f}" for e in brute)
+    print("brute force on exact spheres, phi = 0.02: " + "  ".join(f"{e:+.4f}" for e in brute)
           + f"   {time.perf_counter() - start:.0f} s")
     r_over_l = np.array([r[1] for r in rows])
     mean_excess = np.array([r[2].mean() for r in rows])

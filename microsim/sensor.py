@@ -45,7 +45,6 @@ class Sensor:
                 counts.append(max(1, round(band / omega)))
         ring_counts = np.asarray(counts, dtype=np.int64)
         ring_start = np.concatenate([[0], np.cumsum(ring_counts)]).astype(np.int64)
-        n = int(ring_start[-1])
         ring_of = np.repeat(np.arange(len(ring_counts), dtype=np.int64), ring_counts)
         return cls(ring_counts, ring_start, ring_of)
 

@@ -43,7 +43,7 @@ def roughness_params(flat: bool = False) -> tuple[Param, ...]:
     return (
         Param(
             "roughness",
-            f"isotropic roughness (alpha; sigma in rad for gaussian), sets both axes; "
+            "isotropic roughness (alpha; sigma in rad for gaussian), sets both axes; "
             + (f"0 = flat, else {rng}" if flat else rng),
             0.0 if flat else None,
             lo,
