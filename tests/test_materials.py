@@ -20,8 +20,8 @@ def test_conductor_plane_is_a_mirror_with_fresnel_weight(simulate):
         mirror = t.sensor.lookup(np.array([[-wi[0], -wi[1], wi[2]]]))[0]
         nonzero = np.flatnonzero(t.brdf[i])
         assert list(nonzero) == [mirror]
-        # rays are stored in float32: cos(theta_i) is exact to ~1e-7, F to well within 1e-6
-        assert t.albedo[i] == pytest.approx(fresnel_conductor(wi[2], 0.2, 3.0), rel=1e-6)
+        # the tracer stores rays in float32: the cosine it sees is that of the rounded direction
+        assert t.albedo[i] == pytest.approx(fresnel_conductor(float(np.float32(wi[2])), 0.2, 3.0), rel=1e-12)
 
 
 def test_white_interfaced_lambert_plane_returns_all_energy(simulate):
