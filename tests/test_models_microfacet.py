@@ -57,15 +57,8 @@ def projected_area_integral(distribution, ax, ay, n_tilt=400, n_azimuth=512):
     Polar coordinates in slopes scaled by the distribution's width, radius tan(beta) with
     Gauss-Legendre in beta on (0, pi/2) and the midpoint rule in azimuth.
     """
-    sx, sy = _slope_scales(distribution, ax, ay)
-    beta, wb = _gl(n_tilt, 0.0, 0.5 * math.pi)
-    psi = (np.arange(n_azimuth) + 0.5) * 2.0 * math.pi / n_azimuth
-    b, p = np.meshgrid(beta, psi, indexing="ij")
-    rho = np.tan(b)
-    m = _normal_from_slopes(sx * rho * np.cos(p), sy * rho * np.sin(p))
-    p22 = nd.ndf(distribution, ax, ay, m) * m[..., 2] ** 4
-    jac = sx * sy * rho / np.cos(b) ** 2
-    return float(np.sum(p22 * jac * wb[:, None]) * 2.0 * math.pi / n_azimuth)
+    m, d_omega = _slope_space_rule(distribution, ax, ay, n_tilt, n_azimuth)
+    return float(np.sum(nd.ndf(distribution, ax, ay, m) * m[..., 2] * d_omega))
 
 
 def visible_area_integral(distribution, ax, ay, o, ndf=None, n=128):
