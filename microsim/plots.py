@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .frames import direction
+
 
 def _pyplot():
     import matplotlib
@@ -69,7 +71,7 @@ def incidence_plane(comparison, sensor, i: int, path: Path) -> None:
     rings = np.arange(sensor.n_rings)
     xs, cells = [], []
     for side, sign in ((phi_i, -1.0), (phi_i + np.pi, 1.0)):
-        w = np.stack([np.sin(theta) * np.cos(side), np.sin(theta) * np.sin(side), np.cos(theta)], axis=-1)
+        w = direction(theta, side)
         w[0] = [0.0, 0.0, 1.0]
         cell = sensor.lookup(w)
         keep = rings if sign < 0 else rings[1:]

@@ -25,6 +25,7 @@ import numpy as np
 
 import geometry
 
+from .frames import direction
 from .integrator import (
     ABSORBED, INSIDE_HITS, ORDERS, ROULETTE_KILLS, SEGMENTS, TRANSMITTED, TRUNCATED, PathState, compile_kernels,
     trace_batch,
@@ -68,8 +69,7 @@ class Plan:
         return [(r, i) for r in range(self.realizations) for i in range(self.n_incidences)]
 
     def incidence_direction(self, i: int) -> np.ndarray:
-        t, p = self.theta_i[i], self.phi_i[i]
-        return np.array([math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)])
+        return direction(self.theta_i[i], self.phi_i[i])
 
 
 @dataclass

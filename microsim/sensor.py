@@ -19,6 +19,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from .frames import direction
+
 
 @dataclass(frozen=True)
 class Sensor:
@@ -91,9 +93,7 @@ class Sensor:
         t_lo, t_hi, p_lo, p_hi = self.cell_bounds()
         theta = 0.5 * (t_lo + t_hi)
         theta[self.ring_of_cell() == 0] = 0.0
-        phi = 0.5 * (p_lo + p_hi)
-        s = np.sin(theta)
-        return np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=-1)
+        return direction(theta, 0.5 * (p_lo + p_hi))
 
     def solid_angle(self) -> np.ndarray:
         """Solid angle of every cell: exactly 2 pi / N."""

@@ -33,6 +33,7 @@ import h5py
 import numpy as np
 
 from . import __version__
+from .frames import direction
 from .sensor import Sensor
 
 
@@ -140,8 +141,7 @@ class Table:
     @property
     def wi(self) -> np.ndarray:
         """Incidence directions (n_i, 3)."""
-        s = np.sin(self.theta_i)
-        return np.stack([s * np.cos(self.phi_i), s * np.sin(self.phi_i), np.cos(self.theta_i)], axis=-1)
+        return direction(self.theta_i, self.phi_i)
 
 
 def load(path: str | Path) -> Table:

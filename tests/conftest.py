@@ -1,6 +1,5 @@
 """Shared helpers of the physics tests: run a config dictionary end to end, read the table back."""
 
-import numpy as np
 import pytest
 
 from microsim import config, runner, tables
@@ -20,6 +19,3 @@ def simulate(tmp_path):
 
     return run
 
-
-def incidence_direction(theta: float, phi: float = 0.0) -> np.ndarray:
-    return np.array([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)])

@@ -10,7 +10,8 @@ from microsim.fresnel import fresnel_dielectric_array
 from microsim.models import distributions as nd
 from microsim.models import interfaced_lambert as il
 from microsim.models.microfacet import specular_brdf
-from microsim.models.quadrature import direction, directional_albedo
+from microsim.frames import direction
+from microsim.models.quadrature import directional_albedo
 
 
 def _gl(n, a, b):

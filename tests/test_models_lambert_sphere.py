@@ -22,7 +22,8 @@ from microsim.models.phase import (
     sample_phase_approx,
     sample_phase_exact,
 )
-from microsim.models.quadrature import direction, directional_albedo, hemisphere_rule
+from microsim.frames import direction
+from microsim.models.quadrature import directional_albedo, hemisphere_rule
 
 MODELS = [
     ("lambert_sphere", {"method": "fit"}),

@@ -15,7 +15,8 @@ from microsim import models
 from microsim.fresnel import fresnel_dielectric_array
 from microsim.models import distributions as nd
 from microsim.models.microfacet import specular_brdf
-from microsim.models.quadrature import direction, directional_albedo
+from microsim.frames import direction
+from microsim.models.quadrature import directional_albedo
 
 ISOTROPIC = [0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0]
 ANISOTROPIC = [(0.01, 0.1), (0.05, 1.0), (1.0, 0.1), (0.3, 3.0), (0.01, 3.0)]

@@ -17,7 +17,8 @@ from scipy.special import roots_legendre
 from microsim import models
 from microsim.fresnel import fresnel_dielectric_array
 from microsim.models import micrograin_geometry as geo
-from microsim.models.quadrature import direction, directional_albedo
+from microsim.frames import direction
+from microsim.models.quadrature import directional_albedo
 
 LAMBERT_BULK = dict(bulk="lambert", bulk_albedo=0.6)
 MODEL_CASES = [

@@ -31,11 +31,3 @@ def directional_albedo(model, wi, n_mu: int = 64, n_phi: int = 128) -> np.ndarra
         out[j] = np.sum(f * wo[:, 2] * weight)
     return out.reshape(wi.shape[:-1])
 
-
-def direction(theta, phi=0.0) -> np.ndarray:
-    """Unit vector(s) from polar angle ``theta`` and azimuth ``phi`` (radians), CONVENTIONS 1."""
-    theta = np.asarray(theta, dtype=np.float64)
-    phi = np.asarray(phi, dtype=np.float64)
-    theta, phi = np.broadcast_arrays(theta, phi)
-    s = np.sin(theta)
-    return np.stack([s * np.cos(phi), s * np.sin(phi), np.cos(theta)], axis=-1)
