@@ -1,53 +1,80 @@
-"""Single scattering of dilute Lambertian spheres against radiative transfer (acceptance d).
+"""Single scattering of Boolean Lambertian spheres: radiative-transfer limit and finite size.
 
-The order-1 table of a Boolean sphere suspension with max_order = 1 must match the exact
-single-scattering BRDF of a half space of Lambert-sphere particles,
-c p(-wi.wo) / (mu_i + mu_o) (lambert_sphere_brdf.txt, Eq. 1 and 10), averaged over every cell
-with the cos(theta_o) weight, away from the retro direction where shadow hiding (the
-opposition effect of finite particles) adds light.
+Acceptance d of issue 2 asks the order-1 table (max_order = 1, albedo 0.9) to match the exact
+single scattering of a half space of Lambert-sphere point scatterers,
+c p(-wi.wo) / (mu_i + mu_o) (lambert_sphere_brdf.txt, Eqs. 1 and 10), with median |rel| <= 3 %
+on cells more than 10 deg from retro, at phi = 0.02.
 
-Finite particles also shift the rest of the BRDF: a hit point sits up to one radius above its
-sphere's centre, so it is less attenuated than a point scatterer at the centre's depth; the
-excess over radiative transfer grows linearly with r / l = -3/4 ln(1 - phi) (median over cells,
-theta_i = 0, 30, 60 deg: +0.9 to +1.8 % at phi = 0.005, +4.4 to +5.0 % at 0.02, +7.9 to +9.3 %
-at 0.04; fit 0.005 + 2.5 r / l), and an independent brute-force tracer on exact spheres gives
-the same excess at phi = 0.02 (+4.6 to +5.9 %): benchmarks/dilute_limit.py. The 3 % check is
-therefore made where the suspension is dilute enough for radiative transfer to hold to that
-accuracy, phi = 0.005 (l = 266 radii).
+Spheres of finite size are brighter than point scatterers at first order in r / l
+(microsim/models/boolean_spheres.py): shadow hiding, whose 1 / tan(g / 2) tail reaches far past
+10 deg, and the height of a hit point above its centre. At phi = 0.02 (r / l = 0.015) that model
+predicts a median excess over the point-scatterer formula of 4.0-4.2 % (theta_i = 0, 30, 60),
+and the tracer follows it within its standard errors. So the 3 % check against radiative
+transfer is made at phi = 0.005 (excess 1.0 %), and at phi = 0.02 the table is checked against
+the finite-size model, with a chi-square test that also rejects the point-scatterer formula.
+
+Both runs use the default tile (64 radii): a 24-radius tile adds periodic "ghost" shadow hiding
+between the incoming ray and images of the outgoing one, visible at theta_i >= 60 deg.
 """
 
-import numpy as np
-import pytest
+import math
 
+import numpy as np
+
+from microsim import models
 from microsim.models.phase import phase_lambert_sphere
 
 ALBEDO = 0.9
+REALIZATIONS = 16
+THETA_I = [0.0, 30.0, 60.0]
 
 
-@pytest.fixture(scope="module")
-def table(tmp_path_factory):
-    from microsim import config, runner, tables
-
-    # tile 24 radii instead of the default 64 (3 free paths): rays cross it a few times per
-    # free path, which only matters within 5 deg of the horizon; it keeps the scene at ~1300 spheres.
-    cfg = config.validate({
-        "scene": {"kind": "poisson_spheres", "volume_fraction": 0.005, "tile": 24.0},
+def single_scattering_table(simulate, phi):
+    return simulate({
+        "scene": {"kind": "poisson_spheres", "volume_fraction": phi},
         "material": {"kind": "lambert", "albedo": ALBEDO},
-        "illumination": {"theta_i_deg": [0.0, 30.0, 60.0]},
+        "illumination": {"theta_i_deg": THETA_I},
         "sensor": {"cells": 100},
-        "run": {"paths": 1_200_000, "realizations": 16, "seed": 3, "max_order": 1},
-    })
-    path = tmp_path_factory.mktemp("single") / "single.h5"
-    tables.write(path, runner.run(cfg, workers=2), cfg)
-    return tables.load(path)
+        "run": {"paths": 1_200_000, "realizations": REALIZATIONS, "seed": 3, "max_order": 1},
+    }, workers=2)
 
 
-def test_order_1_matches_the_single_scattering_brdf_away_from_retro(table):
-    sensor = table.sensor
+def point_scatterers(sensor, wi):
+    """c p(-wi.wo) / (mu_i + mu_o), Eq. 10, averaged over each cell (CONVENTIONS 2)."""
+    return sensor.cell_average(lambda wo: ALBEDO * phase_lambert_sphere(-(wo @ wi)) / (wi[2] + wo[:, 2]), 6, 6)
+
+
+def away_from_retro(table, wi):
+    return np.degrees(np.arccos(np.clip(table.direction @ wi, -1, 1))) > 10.0
+
+
+def chi2_bound(n_cells):
+    """Upper bound on the mean z^2 over n cells, z Student-t with R - 1 degrees of freedom
+    (stderr from R realizations): mean nu / (nu - 2), variance of z^2 2 nu^2 (nu - 1) /
+    ((nu - 2)^2 (nu - 4)), plus 5 standard deviations of the mean."""
+    nu = REALIZATIONS - 1
+    variance = 2 * nu**2 * (nu - 1) / ((nu - 2) ** 2 * (nu - 4))
+    return nu / (nu - 2) + 5 * math.sqrt(variance / n_cells)
+
+
+def test_order_1_tends_to_radiative_transfer_for_dilute_spheres(simulate):
+    table = single_scattering_table(simulate, 0.005)
     assert np.all(table.brdf_order[:, 1:, :] == 0.0)
     for i, wi in enumerate(table.wi):
-        model = sensor.cell_average(lambda wo: ALBEDO * phase_lambert_sphere(-(wo @ wi)) / (wi[2] + wo[:, 2]), 6, 6)
-        away = np.degrees(np.arccos(np.clip(table.direction @ wi, -1, 1))) > 10.0
-        relative = table.brdf_order[i, 0, away] / model[away] - 1.0
+        away = away_from_retro(table, wi)
+        relative = table.brdf_order[i, 0, away] / point_scatterers(table.sensor, wi)[away] - 1.0
         assert np.median(np.abs(relative)) <= 0.03
 
+
+def test_order_1_at_phi_002_follows_the_finite_size_model_not_point_scatterers(simulate):
+    table = single_scattering_table(simulate, 0.02)
+    model = models.create("boolean_spheres_single", albedo=ALBEDO, volume_fraction=0.02)
+    order_1, stderr = table.brdf_order[:, 0, :], table.arrays["brdf_order_stderr"][:, 0, :]
+    bound = chi2_bound(table.sensor.n_cells)
+    for i, wi in enumerate(table.wi):
+        finite = table.sensor.cell_average(lambda wo: model(wi, wo), 6, 6)
+        points = point_scatterers(table.sensor, wi)
+        away = away_from_retro(table, wi)
+        assert np.mean(((order_1[i] - finite) / stderr[i]) ** 2) <= bound  # every cell, retro included
+        assert np.median(np.abs(order_1[i, away] / finite[away] - 1.0)) <= 0.03
+        assert np.mean(((order_1[i, away] - points[away]) / stderr[i, away]) ** 2) > bound
