@@ -14,21 +14,24 @@ with probability exp(-n V), V the volume (within z < 0) of centres closer than r
 from x. Deep in the medium V = pi r^2 k h_x - O(h_x): two half-infinite cylinders and the ball
 of x, less their common part O (the centres that would block both rays at once).
 
-* ``I = (k / l) int_0^inf exp(-k h / l + n O(h)) dh`` is shadow hiding, the opposition effect of
-  finite particles: O(h) is the volume common to the two cylinders outside the ball of x, below
-  the top. Kept to all orders in n O: I = 2 exactly at retro (the classical doubling), and its
-  1 / tan(g / 2) tail in the phase angle g is still +1 to +2 % at g = 30 deg for phi = 0.02.
+* ``I = (k / l) int_0^inf exp(-n V(h)) dh`` is shadow hiding, the opposition effect of finite
+  particles: O(h) is the volume common to the two cylinders outside the ball of x, below the
+  top, and V is kept exactly as cut by the top plane (which matters at grazing angles). I tends
+  to 2 at retro as r / l -> 0 (the classical doubling; 2 exp(-2 r / 3 l) at normal retro, the
+  half ball of x), and its 1 / tan(g / 2) tail in the phase angle g is still +1 to +2 % at
+  g = 30 deg for phi = 0.02.
 * ``M`` = mean m_z over the lit and visible surface, weight (m.wi)(m.wo): the hit point's height
   above its centre lowers the attenuation by exp(k m_z / l). Integrating the weight over the
   lune of directions lit and seen gives, with alpha half the angle between wi and wo and u the
   bisector, ``M = u_z (3 pi / 8) cos^3 alpha / ((pi/2 - alpha) cos 2 alpha + sin alpha cos alpha)``
   (M = 3/4 at normal retro).
 
-Dropped terms are O((k r / l)^2) (the top layer, where the cylinders are cut by z = 0 near x).
-Against order-1 tables of the tracer (benchmarks/dilute_limit.py, 16 realizations, so 1.15 is
-expected) chi^2 per cell is 0.83-1.47 for phi = 0.005-0.04 at theta_i = 0, 30, 60 deg, and
-1.07-1.39 at theta_i = 80, 85 deg for phi = 0.005, 0.02; at phi = 0.08 it is 1.5-1.8 and the
-median excess is off by up to 1 %, the size of the dropped terms. r / l = -3/4 ln(1 - phi).
+Dropped: the attenuation of hit points above the top (h < 0) inside the M term, O(k (r / l)^2).
+Against order-1 tables of the tracer (16 realizations, so 1.15 is expected) chi^2 per cell is
+1.01-1.41 for phi = 0.005 and 0.02 at theta_i = 0-85 deg (tests/test_single_scattering.py and
+benchmarks/dilute_limit.py, which also covers phi = 0.01-0.08). The expansion needs k r / l
+small: at grazing retro with k r / l > 1 the neglected attenuation of hit points above the
+top matters. r / l = -3/4 ln(1 - phi).
 """
 
 from __future__ import annotations
@@ -49,12 +52,12 @@ _NODES_T, _NODES_S, _NODES_H = 16, 24, 64
 @numba.njit(cache=True)
 def _frame(a, b):
     """Bisector u, in-plane unit e1 (towards a), normal e2, and the half angle of (a, b)."""
-    cos_psi = min(1.0, max(-1.0, a[0] * b[0] + a[1] * b[1] + a[2] * b[2]))
-    alpha = 0.5 * math.acos(cos_psi)
     u = a + b
-    u = u / math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
     e1 = a - b
+    norm_u = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
     norm = math.sqrt(e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2])
+    alpha = math.atan2(norm, norm_u)  # accurate near retro and near opposite directions
+    u = u / norm_u
     if norm < 1e-12:  # retro: any direction normal to u
         e1 = np.array([1.0, 0.0, 0.0]) if abs(u[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
         e1 = e1 - (e1[0] * u[0] + e1[1] * u[1] + e1[2] * u[2]) * u
@@ -100,7 +103,8 @@ def common_volume(a, b, heights, nodes_t, nodes_s):
     In the frame (u, e1, e2) a point is s u + p e1 + t e2, and q_z is linear in (s, p). At each t
     (midpoint rule) the section outside the ball, s >= sqrt(1 - t^2), is a convex polygon of the
     (s, p) plane (both cylinders, both half-spaces q.a, q.b >= 0): its part below h is clipped
-    exactly. Inside, |p| runs over [B, P], B from the ball: exact in p, midpoint rule in s.
+    exactly. Inside, |p| runs from the ball's edge to the cylinders' reach: exact in p,
+    midpoint rule in s.
     Across, t = -cos(theta) with the midpoint rule in theta.
     """
     out = np.zeros(heights.shape[0])
@@ -117,8 +121,7 @@ def common_volume(a, b, heights, nodes_t, nodes_s):
         dt = w * math.pi / nodes_t
         lift = t * e2[2]
         # the ball zone 0 <= s < w
-        s_end = min(w, w / sa) if sa > 1e-12 else w
-        ds = s_end / nodes_s
+        ds = w / nodes_s
         for i_s in range(nodes_s):
             s = (i_s + 0.5) * ds
             reach = (w - s * sa) / ca
@@ -167,17 +170,31 @@ def lit_visible_height(a, b):
 
 
 @numba.njit(cache=True)
+def _ball_below(h):
+    """Volume of the unit ball about the hit point below the top, the hit point at depth h >= 0."""
+    if h >= 1.0:
+        return 4.0 * math.pi / 3.0
+    return 2.0 * math.pi / 3.0 + math.pi * (h - h**3 / 3.0)
+
+
+@numba.njit(cache=True)
 def shadow_hiding(a, b, r_over_l, nodes_t=_NODES_T, nodes_s=_NODES_S, nodes_h=_NODES_H):
-    """I = (k / l) int_0^inf exp(-k h / l + n O(h)) dh, exponential-linear between depth nodes
-    (spaced as the square of a uniform grid: fine near the top, where O(h) bends)."""
+    """I = (k / l) int_0^inf exp(-n V(h)) dh, V = ball + C_a + C_b - O below the top, each cut
+    exactly by the top plane (C_a: the half-cylinder of a outside the ball, common_volume(a, a));
+    deep down -n V = -k h / l + n O(h). Exponential-linear between depth nodes, spaced as the
+    square of a uniform grid: fine near the top, where the volumes bend."""
     kl = (1.0 / a[2] + 1.0 / b[2]) * r_over_l
     n = r_over_l / math.pi
-    alpha = 0.5 * math.acos(min(1.0, max(-1.0, a[0] * b[0] + a[1] * b[1] + a[2] * b[2])))
+    alpha = _frame(a, b)[3]
     top = 40.0 / kl  # exp(-40): nothing deeper matters
     if math.sin(alpha) > 1e-12:
-        top = min(top, 1.0 / math.sin(alpha) + 2.0)  # O(h) is constant above the common part
+        top = min(top, 1.0 / math.sin(alpha) + 2.0)  # below, O is constant and C_a, C_b linear
     heights = top * np.linspace(0.0, 1.0, nodes_h) ** 2
-    exponent = n * common_volume(a, b, heights, nodes_t, nodes_s) - kl * heights
+    volume = (common_volume(a, a, heights, nodes_t, nodes_s) + common_volume(b, b, heights, nodes_t, nodes_s)
+              - common_volume(a, b, heights, nodes_t, nodes_s))
+    exponent = np.empty(nodes_h)
+    for j in range(nodes_h):
+        exponent[j] = -n * (volume[j] + _ball_below(heights[j]))
     total = 0.0
     for j in range(nodes_h - 1):
         width = heights[j + 1] - heights[j]
@@ -187,7 +204,7 @@ def shadow_hiding(a, b, r_over_l, nodes_t=_NODES_T, nodes_s=_NODES_S, nodes_h=_N
             total += start * width
         else:
             total += start * math.expm1(rate * width) / rate
-    # beyond the last node O is constant: the exponent decays at kl
+    # below the last node the exponent decays at kl
     total += math.exp(exponent[-1]) / kl
     return kl * total
 
