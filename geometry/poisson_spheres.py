@@ -29,7 +29,7 @@ Defaults (every value used is recorded in the table's scene/ attrs):
   3 l, and an outgoing ray can pass the periodic images of the spheres that shadow the incoming
   one ("ghost" shadow hiding, brightest for grazing pairs in the plane of a tile axis). Measured
   on order-1 tables against the finite-size model (boolean_spheres_single, chi^2 per cell, 1.15
-  expected): at the 64 r cap, 1.00-1.39 for phi = 0.005 and 0.02 up to theta_i = 85 deg; with a
+  expected): at the 64 r cap, 1.01-1.39 for phi = 0.005 and 0.02 up to theta_i = 85 deg; with a
   24 r tile, 1.9 and 2.6 at theta_i = 60 and 80 deg for phi = 0.005.
 """
 
