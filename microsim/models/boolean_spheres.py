@@ -100,12 +100,11 @@ def common_volume(a, b, heights, nodes_t, nodes_s):
     """O(h) for every h of ``heights``: volume of the points q within 1 of both rays {t a} and
     {t b}, t >= 0, outside the unit ball, with q_z < h (x at the origin, r = 1).
 
-    In the frame (u, e1, e2) a point is s u + p e1 + t e2, and q_z is linear in (s, p). At each t
-    (midpoint rule) the section outside the ball, s >= sqrt(1 - t^2), is a convex polygon of the
-    (s, p) plane (both cylinders, both half-spaces q.a, q.b >= 0): its part below h is clipped
-    exactly. Inside, |p| runs from the ball's edge to the cylinders' reach: exact in p,
-    midpoint rule in s.
-    Across, t = -cos(theta) with the midpoint rule in theta.
+    In the frame (u, e1, e2) a point is s u + p e1 + t e2, and q_z is linear in (s, p). Across,
+    t = -cos(theta) with the midpoint rule in theta. At each t the section outside the ball,
+    s >= sqrt(1 - t^2), is a convex polygon of the (s, p) plane (both cylinders, both half-spaces
+    q.a, q.b >= 0), clipped exactly below h; inside, |p| runs from the ball's edge to the
+    cylinders' reach: exact in p, midpoint rule in s.
     """
     out = np.zeros(heights.shape[0])
     u, e1, e2, alpha = _frame(a, b)
