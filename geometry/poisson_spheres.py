@@ -6,7 +6,7 @@ projected to its far side.
 
 Spheres of radius r = 1 may overlap. Volume fraction phi = 1 - exp(-n 4/3 pi), so the number
 density is n = -ln(1 - phi) / (4/3 pi) and the free path in the void is exponential with mean
-l = 1 / (n pi) = 4 / (-3 ln(1 - phi)).
+l = 1 / (n pi) = 4 / (-3 ln(1 - phi)) (both from :mod:`microsim.boolean_model`).
 
 Each sphere is an icosphere rotated at random, scaled so that its area is exactly 4 pi: by
 Cauchy's formula its mean projected area is then pi, so the void free path keeps its exact
@@ -45,6 +45,7 @@ from pydantic import Field
 from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation
 
+from microsim.boolean_model import free_path, number_density
 from microsim.fresnel import fresnel_conductor, fresnel_dielectric
 from microsim.scene import MaterialTable, Scene
 from microsim.schema import Section
@@ -74,16 +75,6 @@ def check(config) -> None:
     scene = config.scene
     if scene.subdivisions is not None and scene.mesh_error is not None:
         raise ValueError("scene.mesh_error: give either subdivisions or mesh_error, not both")
-
-
-def number_density(phi: float) -> float:
-    """Centres per unit volume (radius 1): n = -ln(1 - phi) / (4/3 pi)."""
-    return -math.log1p(-phi) / (4.0 / 3.0 * math.pi)
-
-
-def free_path(phi: float) -> float:
-    """Mean void free path l = 4 / (-3 ln(1 - phi)) in radii (CONVENTIONS 5.2)."""
-    return 4.0 / (-3.0 * math.log1p(-phi))
 
 
 def particle_albedo(material: dict) -> float:

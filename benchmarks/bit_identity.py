@@ -1,0 +1,294 @@
+"""Are the tables of this checkout bit-identical to those of another revision?
+
+Traces every shipped run config (at reduced ``--paths``) and the test configs that cover the
+scenes, materials and tracer events (plane, furnace, roulette, truncation, single scattering,
+conductor, interfaced Lambertian and absorber particles, bases, two workers) once with this
+checkout and once with ``--against REV`` (checked out into a temporary git worktree), through
+the command line, and compares the two tables of each config dataset by dataset and byte for
+byte, with every attribute but the provenance that must differ (creation time, wall time).
+
+    python benchmarks/bit_identity.py --against c8660dd        # about 6 min on 2 cores
+
+Prints one line per config and exits 1 if any table differs. A refactoring that must not move
+a bit is checked with this before it lands; ``tests/test_golden.py`` keeps a small table of
+the same kind under test for every later commit.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+PROVENANCE = {"created_utc", "wall_time_s"}
+SHIPPED_PATHS = 20_000
+
+#: name -> (TOML text, extra command-line flags); the test configs of tests/, in TOML
+TEST_CONFIGS = {
+    "furnace": ("""
+[scene]
+kind = "poisson_spheres"
+volume_fraction = 0.3
+tile = 16.0
+depth = 10.0
+[material]
+kind = "lambert"
+albedo = 1.0
+[base]
+kind = "lambert"
+albedo = 1.0
+[illumination]
+theta_i_deg = [0.0, 45.0, 70.0, 85.0]
+[sensor]
+cells = 400
+[run]
+paths = 40_000
+realizations = 8
+seed = 7
+""", []),
+    "roulette-transmitted": ("""
+[scene]
+kind = "poisson_spheres"
+volume_fraction = 0.3
+tile = 16.0
+depth = 10.0
+[material]
+kind = "lambert"
+albedo = 0.9
+[illumination]
+theta_i_deg = [0.0, 60.0, 89.9]
+[sensor]
+cells = 400
+[run]
+paths = 40_000
+realizations = 8
+seed = 7
+""", []),
+    "max-order-2": ("""
+[scene]
+kind = "poisson_spheres"
+volume_fraction = 0.3
+tile = 16.0
+depth = 10.0
+[material]
+kind = "lambert"
+albedo = 0.8
+[illumination]
+theta_i_deg = [30.0]
+[sensor]
+cells = 400
+[run]
+paths = 40_000
+realizations = 8
+seed = 7
+max_order = 2
+""", []),
+    "reciprocity-2-workers": ("""
+[scene]
+kind = "poisson_spheres"
+volume_fraction = 0.3
+tile = 16.0
+depth = 16.0
+[material]
+kind = "lambert"
+albedo = 0.8
+[illumination]
+theta_i_deg = [10.0, 35.0, 55.0, 75.0, 85.0]
+[sensor]
+cells = 300
+[run]
+paths = 40_000
+realizations = 16
+seed = 11
+""", ["--workers", "2"]),
+    "single-scattering-phi002": ("""
+[scene]
+kind = "poisson_spheres"
+volume_fraction = 0.02
+[material]
+kind = "lambert"
+albedo = 0.9
+[illumination]
+theta_i_deg = [0.0, 30.0, 60.0]
+[sensor]
+cells = 100
+[run]
+paths = 64_000
+realizations = 16
+seed = 3
+max_order = 1
+""", []),
+    "conductor-spheres-lambert-base": ("""
+[scene]
+kind = "poisson_spheres"
+volume_fraction = 0.2
+tile = 12.0
+depth = 6.0
+mesh_error = 0.05
+[material]
+kind = "conductor"
+eta = 0.2
+k = 3.0
+[base]
+kind = "lambert"
+albedo = 0.5
+[illumination]
+theta_i_deg = [0.0, 50.0, 80.0]
+[sensor]
+cells = 300
+[run]
+paths = 20_000
+realizations = 4
+seed = 9
+""", []),
+    "interfaced-spheres-absorber-base": ("""
+[scene]
+kind = "poisson_spheres"
+volume_fraction = 0.4
+tile = 12.0
+depth = 6.0
+subdivisions = 1
+[material]
+kind = "interfaced_lambert"
+albedo = 0.7
+eta = 1.5
+[base]
+kind = "absorber"
+[illumination]
+theta_i_deg = [0.0, 70.0]
+[sensor]
+cells = 300
+[run]
+paths = 20_000
+realizations = 4
+seed = 4
+""", []),
+    "plane-conductor": ("""
+[scene]
+kind = "plane"
+[material]
+kind = "conductor"
+eta = 0.2
+k = 3.0
+[illumination]
+theta_i_deg = [0.0, 40.0, 75.0]
+[sensor]
+cells = 400
+[run]
+paths = 2000
+realizations = 64
+seed = 2
+""", []),
+    "plane-interfaced-lambert": ("""
+[scene]
+kind = "plane"
+[material]
+kind = "interfaced_lambert"
+albedo = 0.7
+eta = 1.5
+[illumination]
+theta_i_deg = [0.0, 60.0, 89.0]
+[sensor]
+cells = 400
+[run]
+paths = 40_000
+realizations = 64
+seed = 2
+""", []),
+    "plane-absorber": ("""
+[scene]
+kind = "plane"
+[material]
+kind = "absorber"
+[illumination]
+theta_i_deg = [20.0]
+[sensor]
+cells = 400
+[run]
+paths = 1000
+realizations = 64
+seed = 2
+""", []),
+}
+
+
+def jobs(config_dir: Path) -> dict[str, list[str]]:
+    """name -> `microsim run` arguments (without --out) of every config checked."""
+    out = {}
+    for path in sorted((ROOT / "runs").glob("*.toml")):
+        out[f"runs/{path.name}"] = [str(path), "--paths", str(SHIPPED_PATHS)]
+    for name, (text, flags) in TEST_CONFIGS.items():
+        path = config_dir / f"{name}.toml"
+        path.write_text(text)
+        out[name] = [str(path), *flags]
+    return out
+
+
+def write_tables(source: Path, job_args: dict[str, list[str]], out_dir: Path) -> None:
+    """Run every job with the microsim of ``source`` (a checkout), tables into ``out_dir``."""
+    env = dict(os.environ, PYTHONPATH=str(source))
+    for name, args in job_args.items():
+        table = out_dir / (name.replace("/", "_") + ".h5")
+        command = [sys.executable, "-m", "microsim.cli", "run", *args, "--out", str(table), "--force"]
+        done = subprocess.run(command, cwd=source, env=env, capture_output=True, text=True)
+        if done.returncode != 0:
+            raise SystemExit(f"{source}: {name} failed: {done.stderr.strip()}")
+
+
+def contents(path: Path) -> dict:
+    """Every dataset as (dtype, shape, bytes) and every attribute, by HDF5 path, minus provenance."""
+    items = {}
+    with h5py.File(path, "r") as h5:
+        def visit(name, obj):
+            if isinstance(obj, h5py.Dataset):
+                value = obj[()]
+                items[name] = (value.dtype.str, np.shape(value), np.asarray(value).tobytes())
+            for key, value in obj.attrs.items():
+                items[f"{name}@{key}"] = repr(value)
+        visit("", h5)
+        h5.visititems(visit)
+    return {k: v for k, v in items.items() if k.split("@")[-1] not in PROVENANCE}
+
+
+def differences(a: Path, b: Path) -> list[str]:
+    ca, cb = contents(a), contents(b)
+    return sorted(k for k in ca.keys() | cb.keys() if ca.get(k) != cb.get(k))
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--against", required=True, help="git revision whose tables must be matched")
+    parser.add_argument("--only", help="check only the configs whose name contains this text")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        other = tmp / "checkout"
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", "--quiet", str(other), args.against],
+                       check=True)
+        try:
+            job_args = {k: v for k, v in jobs(tmp).items() if args.only is None or args.only in k}
+            for label, source in (("this", ROOT), ("other", other)):
+                (tmp / label).mkdir()
+                write_tables(source, job_args, tmp / label)
+            failed = 0
+            for name in job_args:
+                file = name.replace("/", "_") + ".h5"
+                diff = differences(tmp / "this" / file, tmp / "other" / file)
+                failed += bool(diff)
+                verdict = "identical" if not diff else "DIFFERS in " + ", ".join(diff)
+                print(f"{name:36s} {verdict}")
+        finally:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(other)], check=True)
+    print(f"{len(job_args) - failed} of {len(job_args)} tables bit-identical to {args.against}")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
