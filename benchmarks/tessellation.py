@@ -64,7 +64,7 @@ def main():
         ref = np.array([a.mean[-1] for a in finest.albedo])
         ref_se = np.array([a.stderr[-1] for a in finest.albedo])
         chi2 = []
-        for e, f in zip(res.exitance, finest.exitance):
+        for e, f in zip(res.brdf, finest.brdf):
             se2 = e.stderr[-1] ** 2 + f.stderr[-1] ** 2
             ok = se2 > 0
             chi2.append(np.mean((e.mean[-1][ok] - f.mean[-1][ok]) ** 2 / se2[ok]))

@@ -25,7 +25,8 @@ import numpy as np
 import geometry
 from microsim import config as config_module
 from microsim import runner
-from microsim.integrator import PathState, trace_batch
+from microsim.integrators.records import SEGMENTS
+from microsim.integrators.surface import SurfaceTracer
 from microsim.rng import geometry_rng, stream_key
 from microsim.sensor import Sensor
 
@@ -48,18 +49,17 @@ def tracer_vs_embree(cfg, paths: int, repeats: int = 3):
     plan = runner.Plan.from_config(cfg)
     generator = geometry.SCENES[cfg.scene.kind]
     scene = generator.generate(plan.scene, cfg, geometry_rng(cfg.run.seed, 0))
-    embree_scene = scene.embree()
-    sensor = Sensor.build(plan.sensor_cells)
-    state = PathState(paths)
+    tracer = SurfaceTracer(scene, Sensor.build(plan.sensor_cells))
+    embree_scene = tracer.embree
     wi = plan.incidence_direction(0)
-    trace_batch(scene, embree_scene, sensor, wi, 1000, stream_key(0, 0, 0), 0)  # compile
+    tracer.trace(wi, 1000, stream_key(0, 0, 0), 0)  # compile
     best_trace, best_raw, segments = np.inf, np.inf, 0
     for k in range(repeats):
-        recorder = RecordingScene(embree_scene)
+        tracer.embree = recorder = RecordingScene(embree_scene)
         start = time.perf_counter()
-        tally = trace_batch(scene, recorder, sensor, wi, paths, stream_key(cfg.run.seed, 0, k), 0, state)
+        tally = tracer.trace(wi, paths, stream_key(cfg.run.seed, 0, k), 0)
         best_trace = min(best_trace, time.perf_counter() - start)
-        segments = int(tally.counts[0])
+        segments = int(tally.counts[SEGMENTS])
         start = time.perf_counter()
         for origins, directions, dists in recorder.batches:
             embree_scene.run(origins, directions, dists=dists, output=1)

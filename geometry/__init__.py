@@ -1,10 +1,12 @@
 """Generators of random microgeometry, one module per scene kind (CONVENTIONS 5).
 
-A generator module provides ``KIND``; ``Config``, the pydantic model of its ``[scene]`` table;
-``check(config)``, cross-section rules (raises ValueError with a one-line message);
-``resolve(config) -> dict``, every scene parameter with its defaults filled in (stored in the
-table's ``scene/`` attrs); and ``generate(resolved, config, rng) -> microsim.scene.Scene``, one
-random realization.
+A generator module provides ``KIND``; ``INTEGRATOR``, the name of the integrator that traces
+its scenes (a key of ``microsim.integrators.INTEGRATORS``; "surface" for Embree triangles);
+``Config``, the pydantic model of its ``[scene]`` table; ``check(config)``, cross-section rules
+(raises ValueError with a one-line message); ``resolve(config) -> dict``, every scene parameter
+with its defaults filled in (stored in the table's ``scene/`` attrs); and
+``generate(resolved, config, rng)``, one random realization in the form its integrator takes
+(for "surface", a ``microsim.scene.Scene`` assembled with ``SceneBuilder``).
 """
 
 from . import plane, poisson_spheres

@@ -46,14 +46,12 @@ from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation
 
 from microsim.boolean_model import free_path, number_density
-from microsim.fresnel import fresnel_conductor, fresnel_dielectric
-from microsim.scene import MaterialTable, Scene
+from microsim.scene import Scene, SceneBuilder
 from microsim.schema import Section
 from microsim.shapes import Shapes
 
-from .plane import base_quad
-
 KIND = "poisson_spheres"
+INTEGRATOR = "surface"
 TRANSMISSION_TARGET = 1e-3
 MAX_OPTICAL_DEPTH = 40.0
 TILE_FREE_PATHS = 3.0
@@ -75,20 +73,6 @@ def check(config) -> None:
     scene = config.scene
     if scene.subdivisions is not None and scene.mesh_error is not None:
         raise ValueError("scene.mesh_error: give either subdivisions or mesh_error, not both")
-
-
-def particle_albedo(material: dict) -> float:
-    """Albedo of one interaction with the particle material, an upper estimate for the depth rule."""
-    kind = material["kind"]
-    if kind == "lambert":
-        return material["albedo"]
-    if kind == "conductor":
-        grazing = np.linspace(0.0, 1.0, 101)
-        return float(max(fresnel_conductor(c, material["eta"], material["k"]) for c in grazing))
-    if kind == "interfaced_lambert":
-        f0 = fresnel_dielectric(1.0, material["eta"])
-        return min(1.0, f0 + (1.0 - f0) * material["albedo"])
-    return 0.0
 
 
 def diffusion_decay(c: float) -> float:
@@ -137,7 +121,7 @@ def resolve(config) -> dict:
     phi = scene.volume_fraction
     n = number_density(phi)
     l = free_path(phi)
-    c = particle_albedo(config.material.model_dump())
+    c = config.material.albedo_bound()
     tau = default_optical_depth(c, config.run.max_order)
     depth = scene.depth if scene.depth is not None else tau * l
     tile = scene.tile if scene.tile is not None else min(max(TILE_FREE_PATHS * l, TILE_RANGE[0]), TILE_RANGE[1])
@@ -197,18 +181,10 @@ def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
     vertices = np.einsum("sij,vj->svi", rotations[source], vertices0) + all_centres[:, None, :]
     faces = faces0[None, :, :] + (np.arange(n_all) * len(vertices0))[:, None, None]
     face_shape = np.repeat(np.arange(n_all, dtype=np.int32), len(faces0))
-    shapes = Shapes.spheres(all_centres, 1.0, vertex_radius, material=0)
-    vertices = vertices.reshape(-1, 3)
-    faces = faces.reshape(-1, 3)
-    specs = [config.material.model_dump()]
+    builder = SceneBuilder(tile)
+    builder.add(vertices.reshape(-1, 3), faces.reshape(-1, 3), face_shape,
+                Shapes.spheres(all_centres, 1.0, vertex_radius), config.material)
     if config.base is not None:
-        base_v, base_f = base_quad(tile, resolved["base_z"])
-        faces = np.concatenate([faces, base_f + len(vertices)])
-        vertices = np.concatenate([vertices, base_v])
-        face_shape = np.concatenate([face_shape, np.full(2, n_all, np.int32)])
-        shapes = Shapes.concatenate([shapes, Shapes.planes(np.array([[0.0, 0.0, resolved["base_z"]]]),
-                                                           np.array([[0.0, 0.0, 1.0]]), material=1, size=tile)])
-        specs.append(config.base.model_dump())
-    info = dict(resolved, spheres=int(count), sphere_images=int(n_all - count), triangles=int(len(faces)))
-    return Scene(vertices, faces, face_shape, shapes, MaterialTable.from_specs(specs),
-                 tile, resolved["z_top"], resolved["z_bottom"], info)
+        builder.add_base_plane(resolved["base_z"], config.base)
+    info = dict(resolved, spheres=int(count), sphere_images=int(n_all - count))
+    return builder.build(resolved["z_top"], resolved["z_bottom"], info)

@@ -1,8 +1,9 @@
 """Run configs (CONVENTIONS 4): TOML in, validated pydantic models out, one-line errors.
 
 Every section is a strict pydantic model: unknown keys, wrong types and out-of-range values
-are rejected. Scene kinds come from the generator registry (``geometry.SCENES``), each with
-its own model, selected by ``kind``. :func:`load` turns any problem into a :class:`ConfigError`
+are rejected. Scene kinds come from the generator registry (``geometry.SCENES``) and material
+kinds from the material registry (``microsim.materials.MATERIALS``), each with its own model,
+selected by ``kind``. :func:`load` turns any problem into a :class:`ConfigError`
 whose message is one line naming the key and the accepted values.
 """
 
@@ -21,6 +22,7 @@ from pydantic import BaseModel, Field
 
 import geometry
 
+from .materials import MATERIALS
 from .schema import Section
 
 
@@ -28,28 +30,7 @@ class ConfigError(ValueError):
     """A bad config: the message is one line naming the key and what is accepted."""
 
 
-class Lambert(Section):
-    kind: Literal["lambert"]
-    albedo: float = Field(ge=0.0, le=1.0, description="Lambertian albedo")
-
-
-class Absorber(Section):
-    kind: Literal["absorber"]
-
-
-class Conductor(Section):
-    kind: Literal["conductor"]
-    eta: float = Field(gt=0.0, le=100.0, description="real part of the complex index")
-    k: float = Field(ge=0.0, le=100.0, description="imaginary part of the complex index")
-
-
-class InterfacedLambert(Section):
-    kind: Literal["interfaced_lambert"]
-    albedo: float = Field(ge=0.0, le=1.0, description="albedo K_d of the Lambertian body")
-    eta: float = Field(ge=1.0, le=4.0, description="refractive index ratio n_i of the interface")
-
-
-Material = Annotated[Union[Lambert, Absorber, Conductor, InterfacedLambert], Field(discriminator="kind")]
+Material = Annotated[Union[tuple(MATERIALS.values())], Field(discriminator="kind")]
 Scene = Annotated[Union[tuple(g.Config for g in geometry.SCENES.values())], Field(discriminator="kind")]
 
 

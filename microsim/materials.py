@@ -1,127 +1,166 @@
-"""Surface materials of the tracer: a registry of kinds, each sampled exactly in numba.
+"""Surface materials: one definition per kind, and their exact sampling in numba.
 
-A material is a kind code and up to ``N_PARAMS`` parameters (a row of the scene's material
-table), built from its config dictionary by :func:`material_row`. :func:`scatter` samples the
-outgoing direction of one interaction exactly (the sampled density equals BSDF * cos / weight)
-and returns the factor by which the path weight is multiplied; 0 ends the path (absorbed).
+A material kind is defined once, as a config section below (Mitsuba 3's one plugin, one place):
+its ``kind`` name and parameters with their accepted ranges (the ``[material]`` / ``[base]``
+tables of CONVENTIONS 4, validated by :mod:`microsim.config`), its kind ``code``, its parameter
+row (the parameters in the order they are declared, read by position in :func:`scatter`) and
+its ``albedo_bound`` (used by generators for default slab depths). Defining a subclass
+registers it in ``MATERIALS``; the config schema, the scene's material table and the generators
+all derive from that registry. A new kind costs its definition and one branch of
+:func:`scatter`; a code without a branch is refused when a material table is built.
 
-Kinds:
-
-- ``absorber``: absorbs everything.
-- ``lambert``: ``albedo``; cosine sampling about the shading normal, weight x albedo.
-- ``conductor``: smooth metal with complex index ``eta + i k``; mirror reflection, weight x
-  Fresnel reflectance (exact unpolarised form, :mod:`microsim.fresnel`).
-- ``interfaced_lambert``: a smooth dielectric interface (index ratio ``eta``) over a Lambertian
-  body of albedo ``albedo`` (the flat interfaced Lambertian of
-  interfaced_lambertian_microfacets.txt, Eq. 8-10): Fresnel reflection or refraction at the
-  interface, then Lambertian bounces in the body with Fresnel (and total internal) reflection
-  at the interface from inside until the light leaves. The whole excursion is one interaction.
+:func:`scatter` samples the outgoing direction of one interaction exactly (the sampled density
+equals BSDF * cos / weight) and returns the factor by which the path weight is multiplied; 0
+ends the path (absorbed).
 """
 
 from __future__ import annotations
 
 import math
+import typing
+from typing import ClassVar, Literal
 
 import numba
 import numpy as np
+from pydantic import Field
 
 from .fresnel import fresnel_conductor, fresnel_dielectric
 from .rng import uniform
+from .sampling import from_local, reflect, sample_cosine
+from .schema import Section
 
-ABSORBER = 0
-LAMBERT = 1
-CONDUCTOR = 2
-INTERFACED_LAMBERT = 3
-N_PARAMS = 2
-
-#: kind name -> (code, parameter names in row order)
-KINDS = {
-    "absorber": (ABSORBER, ()),
-    "lambert": (LAMBERT, ("albedo",)),
-    "conductor": (CONDUCTOR, ("eta", "k")),
-    "interfaced_lambert": (INTERFACED_LAMBERT, ("albedo", "eta")),
-}
+#: kind name -> definition, in the order of definition
+MATERIALS: dict[str, type["Material"]] = {}
 
 #: cap on the body bounces of one interfaced_lambert interaction; weight left is truncated
 MAX_BODY_BOUNCES = 256
+#: cosines at which a conductor's reflectance is probed for its largest value
+_CONDUCTOR_PROBES = 101
 
 
-def material_row(spec: dict) -> tuple[int, np.ndarray]:
-    """(kind code, parameter row) of a validated material dictionary such as {"kind": "lambert", "albedo": 0.8}."""
-    code, names = KINDS[spec["kind"]]
-    row = np.zeros(N_PARAMS)
-    for j, name in enumerate(names):
-        row[j] = spec[name]
-    return code, row
+class Material(Section):
+    """A material kind: ``kind``, then its parameters in row order; ``code`` for the tracer."""
+
+    code: ClassVar[int]
+
+    @classmethod
+    def __pydantic_init_subclass__(cls, **kwargs):
+        super().__pydantic_init_subclass__(**kwargs)
+        name = typing.get_args(cls.model_fields["kind"].annotation)[0]
+        if name in MATERIALS or cls.code in codes():
+            raise TypeError(f"material kind {name!r} (code {cls.code}) is defined twice")
+        MATERIALS[name] = cls
+
+    @classmethod
+    def parameter_names(cls) -> tuple[str, ...]:
+        return tuple(name for name in cls.model_fields if name != "kind")
+
+    def row(self) -> tuple[float, ...]:
+        """The parameters in declaration order: the material's row of a scene's material table."""
+        return tuple(float(getattr(self, name)) for name in self.parameter_names())
+
+    def albedo_bound(self) -> float:
+        """An upper estimate of the weight factor of one interaction (for default slab depths)."""
+        raise NotImplementedError
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def orthonormal_basis(nx, ny, nz):
-    """Two tangents completing the unit normal n (Duff et al. 2017, branchless)."""
-    sign = 1.0 if nz >= 0.0 else -1.0
-    a = -1.0 / (sign + nz)
-    b = nx * ny * a
-    return (1.0 + sign * nx * nx * a, sign * b, -sign * nx), (b, sign + ny * ny * a, -ny)
+def codes() -> set[int]:
+    """Kind codes of every defined material."""
+    return {m.code for m in MATERIALS.values()}
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def sample_cosine(states, i, nx, ny, nz):
-    """Direction about the normal n with density cos(theta) / pi (Malley: a uniform point of the
-    unit disk, by rejection from its square, lifted onto the hemisphere; no trigonometry)."""
-    while True:
-        a = 2.0 * uniform(states, i) - 1.0
-        b = 2.0 * uniform(states, i) - 1.0
-        r2 = a * a + b * b
-        if r2 < 1.0:
-            break
-    c = math.sqrt(1.0 - r2)
-    t, s = orthonormal_basis(nx, ny, nz)
-    return (
-        a * t[0] + b * s[0] + c * nx,
-        a * t[1] + b * s[1] + c * ny,
-        a * t[2] + b * s[2] + c * nz,
-    )
+def row_length() -> int:
+    """Width of a material table row: the largest parameter count of any kind."""
+    return max(len(m.parameter_names()) for m in MATERIALS.values())
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def reflect(dx, dy, dz, nx, ny, nz):
-    """Mirror direction of the propagation direction d about n."""
-    c = 2.0 * (dx * nx + dy * ny + dz * nz)
-    return dx - c * nx, dy - c * ny, dz - c * nz
+class Absorber(Material):
+    """Absorbs everything."""
+
+    kind: Literal["absorber"]
+    code: ClassVar[int] = 0
+
+    def albedo_bound(self) -> float:
+        return 0.0
+
+
+class Lambert(Material):
+    """Lambertian reflector: cosine sampling about the shading normal, weight x albedo."""
+
+    kind: Literal["lambert"]
+    albedo: float = Field(ge=0.0, le=1.0, description="Lambertian albedo")
+    code: ClassVar[int] = 1
+
+    def albedo_bound(self) -> float:
+        return self.albedo
+
+
+class Conductor(Material):
+    """Smooth metal with complex index eta + i k: mirror reflection, weight x Fresnel reflectance
+    (exact unpolarised form, :mod:`microsim.fresnel`)."""
+
+    kind: Literal["conductor"]
+    eta: float = Field(gt=0.0, le=100.0, description="real part of the complex index")
+    k: float = Field(ge=0.0, le=100.0, description="imaginary part of the complex index")
+    code: ClassVar[int] = 2
+
+    def albedo_bound(self) -> float:
+        cosines = np.linspace(0.0, 1.0, _CONDUCTOR_PROBES)
+        return float(max(fresnel_conductor(c, self.eta, self.k) for c in cosines))
+
+
+class InterfacedLambert(Material):
+    """A smooth dielectric interface (index ratio ``eta``) over a Lambertian body of albedo
+    ``albedo``: the flat interfaced Lambertian of interfaced_lambertian_microfacets.txt, Eq. 8-10.
+    Fresnel reflection or refraction at the interface, then Lambertian bounces in the body with
+    Fresnel (and total internal) reflection at the interface from inside until the light leaves.
+    The whole excursion is one interaction."""
+
+    kind: Literal["interfaced_lambert"]
+    albedo: float = Field(ge=0.0, le=1.0, description="albedo K_d of the Lambertian body")
+    eta: float = Field(ge=1.0, le=4.0, description="refractive index ratio n_i of the interface")
+    code: ClassVar[int] = 3
+
+    def albedo_bound(self) -> float:
+        f0 = fresnel_dielectric(1.0, self.eta)
+        return min(1.0, f0 + (1.0 - f0) * self.albedo)
+
+
+ABSORBER, LAMBERT, CONDUCTOR, INTERFACED_LAMBERT = (Absorber.code, Lambert.code, Conductor.code,
+                                                    InterfacedLambert.code)
 
 
 @numba.njit(cache=True, error_model="numpy")
-def scatter(kind, prm, states, i, dx, dy, dz, nx, ny, nz):
+def scatter(kind, prm, states, i, d, n):
     """One interaction: returns (new direction, weight factor, truncated weight fraction).
 
-    ``d`` is the propagation direction of the arriving ray (pointing into the surface) and n
-    the outward shading normal. A weight factor of 0 means the path ends.
+    ``d`` is the propagation direction of the arriving ray (pointing into the surface), ``n``
+    the outward unit shading normal, ``prm`` the material's parameter row. A weight factor of 0
+    means the path ends.
     """
     if kind == LAMBERT:
-        ox, oy, oz = sample_cosine(states, i, nx, ny, nz)
-        return ox, oy, oz, prm[0], 0.0
+        return sample_cosine(states, i, n), prm[0], 0.0
     if kind == CONDUCTOR:
-        cos_i = -(dx * nx + dy * ny + dz * nz)
-        ox, oy, oz = reflect(dx, dy, dz, nx, ny, nz)
-        return ox, oy, oz, fresnel_conductor(cos_i, prm[0], prm[1]), 0.0
+        cos_i = -(d[0] * n[0] + d[1] * n[1] + d[2] * n[2])
+        return reflect(d, n), fresnel_conductor(cos_i, prm[0], prm[1]), 0.0
     if kind == INTERFACED_LAMBERT:
-        return _interfaced_lambert(prm[0], prm[1], states, i, dx, dy, dz, nx, ny, nz)
-    return dx, dy, dz, 0.0, 0.0
+        return _interfaced_lambert(prm[0], prm[1], states, i, d, n)
+    if kind == ABSORBER:
+        return d, 0.0, 0.0
+    raise ValueError("scatter: unknown material kind code")
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _interfaced_lambert(albedo, eta, states, i, dx, dy, dz, nx, ny, nz):
-    """Smooth dielectric over a Lambertian body, sampled bounce by bounce (see module doc)."""
-    cos_i = -(dx * nx + dy * ny + dz * nz)
+def _interfaced_lambert(albedo, eta, states, i, d, n):
+    """Smooth dielectric over a Lambertian body, sampled bounce by bounce (see InterfacedLambert)."""
+    cos_i = -(d[0] * n[0] + d[1] * n[1] + d[2] * n[2])
     if uniform(states, i) < fresnel_dielectric(cos_i, eta):
-        ox, oy, oz = reflect(dx, dy, dz, nx, ny, nz)
-        return ox, oy, oz, 1.0, 0.0
+        return reflect(d, n), 1.0, 0.0
     weight = 1.0
-    t, s = orthonormal_basis(nx, ny, nz)
     for _ in range(MAX_BODY_BOUNCES):
         weight *= albedo
         if weight == 0.0:
-            return dx, dy, dz, 0.0, 0.0
+            return d, 0.0, 0.0
         # Lambertian body: cosine-distributed direction towards the interface (inside).
         u1 = uniform(states, i)
         u2 = uniform(states, i)
@@ -132,13 +171,5 @@ def _interfaced_lambert(albedo, eta, states, i, dx, dy, dz, nx, ny, nz):
             sin_o = min(eta * sin_t, 1.0)
             cos_o = math.sqrt(max(0.0, 1.0 - sin_o * sin_o))
             phi = 2.0 * math.pi * u2
-            a = sin_o * math.cos(phi)
-            b = sin_o * math.sin(phi)
-            return (
-                a * t[0] + b * s[0] + cos_o * nx,
-                a * t[1] + b * s[1] + cos_o * ny,
-                a * t[2] + b * s[2] + cos_o * nz,
-                weight,
-                0.0,
-            )
-    return dx, dy, dz, 0.0, weight
+            return from_local(sin_o * math.cos(phi), sin_o * math.sin(phi), cos_o, n), weight, 0.0
+    return d, 0.0, weight

@@ -26,10 +26,8 @@ import numpy as np
 import geometry
 
 from .frames import direction
-from .integrator import (
-    ABSORBED, INSIDE_HITS, ORDERS, ROULETTE_KILLS, SEGMENTS, TRANSMITTED, TRUNCATED, PathState, compile_kernels,
-    trace_batch,
-)
+from .integrators import INTEGRATORS
+from .integrators.records import COUNT_NAMES, ENERGY_NAMES, ORDERS
 from .rng import geometry_rng, stream_key
 from .sensor import Sensor
 
@@ -71,6 +69,16 @@ class Plan:
     def incidence_direction(self, i: int) -> np.ndarray:
         return direction(self.theta_i[i], self.phi_i[i])
 
+    @property
+    def generator(self):
+        """The scene generator module of the config's scene kind."""
+        return geometry.SCENES[self.config.scene.kind]
+
+    @property
+    def tracer(self):
+        """The integrator class that traces the scenes of this run (named by the generator)."""
+        return INTEGRATORS[self.generator.INTEGRATOR]
+
 
 @dataclass
 class Estimate:
@@ -106,10 +114,10 @@ class Result:
 
     plan: Plan
     sensor: Sensor
-    exitance: list  # per incidence: Estimate over (ORDERS + 1, n_cells), last row = all orders
+    brdf: list  # per incidence: Estimate of f_C over (ORDERS + 1, n_cells), last row = all orders
     albedo: list  # per incidence: Estimate over (ORDERS + 1,)
-    energy: list  # per incidence: Estimate over (transmitted, truncated, absorbed, balance)
-    counts: np.ndarray  # (n_incidences, 3) segments, inside hits, roulette kills
+    energy: list  # per incidence: Estimate over (*ENERGY_NAMES, balance)
+    counts: np.ndarray  # (n_incidences, len(COUNT_NAMES)) tracer event counts
     scene_info: dict = field(default_factory=dict)  # realization -> info of the generated scene
     wall_time: float = 0.0
 
@@ -128,8 +136,8 @@ class _Reducer:
             plan, sensor,
             [Estimate.zeros((ORDERS + 1, n_c)) for _ in range(n_i)],
             [Estimate.zeros(ORDERS + 1) for _ in range(n_i)],
-            [Estimate.zeros(4) for _ in range(n_i)],
-            np.zeros((n_i, 3), np.int64),
+            [Estimate.zeros(len(ENERGY_NAMES) + 1) for _ in range(n_i)],
+            np.zeros((n_i, len(COUNT_NAMES)), np.int64),
         )
         self.order = {unit: k for k, unit in enumerate(plan.units)}
         self.pending = {}
@@ -148,12 +156,12 @@ class _Reducer:
         res = self.result
         per_path = tally.exit_weight / tally.paths
         cells = np.vstack([per_path, per_path.sum(axis=0)])
-        res.exitance[i].add(cells / res.sensor.projected_solid_angle())
+        res.brdf[i].add(cells / res.sensor.projected_solid_angle())
         albedo = cells.sum(axis=1)
         res.albedo[i].add(albedo)
-        lost = tally.energy[[TRANSMITTED, TRUNCATED, ABSORBED]] / tally.paths
+        lost = tally.energy / tally.paths
         res.energy[i].add(np.append(lost, albedo[-1] + lost.sum()))
-        res.counts[i] += tally.counts[[SEGMENTS, INSIDE_HITS, ROULETTE_KILLS]]
+        res.counts[i] += tally.counts
 
     @property
     def done(self) -> bool:
@@ -163,18 +171,17 @@ class _Reducer:
 def trace_units(plan: Plan, units, emit) -> None:
     """Trace ``units`` in order, calling ``emit(unit, tally, scene_info)`` after each."""
     sensor = Sensor.build(plan.sensor_cells)
-    generator = geometry.SCENES[plan.config.scene.kind]
+    generator = plan.generator
     seed, max_order = plan.config.run.seed, plan.config.run.max_order
-    current, scene, embree_scene = None, None, None
-    state = PathState(plan.paths_per_realization)
+    current, tracer = None, None
     for r, i in units:
         if r != current:
-            embree_scene = None
+            tracer = None  # the previous realization's scene and acceleration structure go first
             scene = generator.generate(plan.scene, plan.config, geometry_rng(seed, r))
-            embree_scene = scene.embree()
+            tracer = plan.tracer(scene, sensor)
             current = r
-        tally = trace_batch(scene, embree_scene, sensor, plan.incidence_direction(i), plan.paths_per_realization,
-                            stream_key(seed, r, i), max_order, state)
+        tally = tracer.trace(plan.incidence_direction(i), plan.paths_per_realization, stream_key(seed, r, i),
+                             max_order)
         emit((r, i), tally, scene.info)
 
 
@@ -212,7 +219,7 @@ def run(config, workers: int = 1, progress=None) -> Result:
     if len(blocks) <= 1:
         trace_units(plan, plan.units, collect)
     else:
-        compile_kernels(sensor)
+        plan.tracer.compile(sensor)
         context = multiprocessing.get_context("fork")
         q = context.Queue()
         with ProcessPoolExecutor(len(blocks), mp_context=context, initializer=_init_worker, initargs=(q,)) as pool:

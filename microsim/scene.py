@@ -1,20 +1,26 @@
-"""What a generator hands the tracer: triangles for Embree plus the analytic data behind them.
+"""What a generator hands the surface tracer: triangles for Embree plus the analytic data behind them.
 
 The scene is periodic in x and y over the tile [0, L)^2 (shapes crossing the tile edge come
 with their periodic images) and bounded in z: nothing can be hit above ``z_top``; a ray going
 below ``z_bottom`` has left through the bottom of the slab (transmitted). Every triangle names
 its analytic shape (``face_shape``); every shape names its material (an index into
-``materials``).
+``materials``). Generators assemble scenes with :class:`SceneBuilder`, which also lays the base
+plane that every scene kind can have.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
-from .materials import N_PARAMS, material_row
+from .materials import Material, codes, row_length
 from .shapes import Shapes
+
+#: the base plane's two triangles overhang the tile by this fraction on every side
+BASE_MARGIN = 0.01
 
 
 @dataclass
@@ -22,14 +28,35 @@ class MaterialTable:
     """Kind codes and parameter rows of the materials a scene uses."""
 
     kind: np.ndarray  # (M,) int32
-    params: np.ndarray  # (M, materials.N_PARAMS) float64
+    params: np.ndarray  # (M, materials.row_length()) float64
+
+    def __post_init__(self):
+        unknown = set(np.unique(self.kind).tolist()) - codes()
+        if unknown:
+            raise ValueError(f"material kind codes {sorted(unknown)} unknown; known: {sorted(codes())}")
 
     @classmethod
-    def from_specs(cls, specs: list[dict]) -> "MaterialTable":
-        rows = [material_row(s) for s in specs]
-        kind = np.array([r[0] for r in rows], dtype=np.int32)
-        params = np.array([r[1] for r in rows], dtype=np.float64).reshape(len(rows), N_PARAMS)
-        return cls(kind, params)
+    def of(cls, materials: list[Material]) -> "MaterialTable":
+        params = np.zeros((len(materials), row_length()))
+        for j, material in enumerate(materials):
+            row = material.row()
+            params[j, : len(row)] = row
+        return cls(np.array([m.code for m in materials], dtype=np.int32), params)
+
+
+class SceneArrays(NamedTuple):
+    """What the tracer's kernels read of a scene (see :class:`Scene` and :class:`Shapes`)."""
+
+    face_shape: np.ndarray
+    shape_kind: np.ndarray
+    shape_params: np.ndarray
+    shape_material: np.ndarray
+    shape_size: np.ndarray
+    material_kind: np.ndarray
+    material_params: np.ndarray
+    tile: float
+    z_top: float
+    z_bottom: float
 
 
 @dataclass
@@ -60,12 +87,44 @@ class Scene:
     def n_triangles(self) -> int:
         return len(self.faces)
 
-    def embree(self):
-        """A committed Embree scene of the triangles (built in the process that traces)."""
-        from embreex import mesh_construction, rtcore_scene
+    def arrays(self) -> SceneArrays:
+        s = self.shapes
+        return SceneArrays(self.face_shape, s.kind, s.params, s.material, s.size, self.materials.kind,
+                           self.materials.params, self.tile, self.z_top, self.z_bottom)
 
-        scene = rtcore_scene.EmbreeScene()
-        mesh_construction.TriangleMesh(scene, self.vertices, self.faces)
-        probe = np.zeros((1, 3), np.float32)
-        scene.run(probe, probe + np.float32([0, 0, 1]), dists=np.zeros(1, np.float32))  # commits the BVH
-        return scene
+
+class SceneBuilder:
+    """Assembles a :class:`Scene` part by part: each part's triangles, shapes and material.
+
+    Parts keep the order in which they are added (triangle, shape and material indices follow
+    it); the table's ``triangles`` count is added to the scene's info.
+    """
+
+    def __init__(self, tile: float):
+        self.tile = tile
+        self.vertices, self.faces, self.face_shape, self.shapes, self.materials = [], [], [], [], []
+        self.n_vertices = self.n_shapes = 0
+
+    def add(self, vertices, faces, face_shape, shapes: Shapes, material: Material) -> None:
+        """A mesh whose faces name shapes by their index in ``shapes``, all made of ``material``."""
+        self.vertices.append(vertices)
+        self.faces.append(faces + self.n_vertices)
+        self.face_shape.append(face_shape + self.n_shapes)
+        self.shapes.append(dataclasses.replace(shapes, material=np.full(len(shapes), len(self.materials), np.int32)))
+        self.materials.append(material)
+        self.n_vertices += len(vertices)
+        self.n_shapes += len(shapes)
+
+    def add_base_plane(self, z: float, material: Material) -> None:
+        """The plane at height ``z`` facing +z: two triangles covering the tile with a margin."""
+        lo, hi = -BASE_MARGIN * self.tile, (1.0 + BASE_MARGIN) * self.tile
+        vertices = np.array([[lo, lo, z], [hi, lo, z], [hi, hi, z], [lo, hi, z]], dtype=np.float32)
+        faces = np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int32)
+        plane = Shapes.planes(np.array([[0.0, 0.0, z]]), np.array([[0.0, 0.0, 1.0]]), size=self.tile)
+        self.add(vertices, faces, np.zeros(2, np.int32), plane, material)
+
+    def build(self, z_top: float, z_bottom: float, info: dict) -> Scene:
+        faces = np.concatenate(self.faces)
+        return Scene(np.concatenate(self.vertices), faces, np.concatenate(self.face_shape),
+                     Shapes.concatenate(self.shapes), MaterialTable.of(self.materials), self.tile, z_top, z_bottom,
+                     dict(info, triangles=int(len(faces))))

@@ -14,7 +14,7 @@ Lookup: u = (1 - z) N lies in [C_{k-1}, C_k) for the ring k of direction (x, y, 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -22,9 +22,12 @@ import numpy as np
 from .frames import direction
 
 
-@dataclass(frozen=True)
-class Sensor:
-    """Cell layout of the hemispherical sensor (all angles in radians)."""
+class Sensor(NamedTuple):
+    """Cell layout of the hemispherical sensor (all angles in radians).
+
+    A namedtuple of its three lookup arrays, so that numba kernels take the sensor itself
+    (:func:`cell_index`).
+    """
 
     ring_counts: np.ndarray  # (n_rings,) cells per ring
     ring_start: np.ndarray  # (n_rings + 1,) index of the first cell of each ring; last = N
@@ -109,7 +112,7 @@ class Sensor:
     def lookup(self, w: np.ndarray) -> np.ndarray:
         """Cell index of each direction of ``w`` (M, 3) with w.z > 0."""
         w = np.ascontiguousarray(w, dtype=np.float64).reshape(-1, 3)
-        return _cell_indices(w, self.ring_counts, self.ring_start, self.ring_of)
+        return _cell_indices(w, self)
 
     def cell_quadrature(self, n_theta: int = 4, n_phi: int = 4):
         """Nodes and weights averaging a function over each cell with the cos(theta) weight.
@@ -146,28 +149,29 @@ class Sensor:
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def cell_index(x, y, z, ring_counts, ring_start, ring_of):
-    """Cell of the direction (x, y, z), z > 0: O(1) (see module docstring)."""
-    n = ring_start[-1]
+def cell_index(d, sensor):
+    """Cell of the direction d = (x, y, z), z > 0: O(1) (see module docstring)."""
+    x, y, z = d
+    n = sensor.ring_start[-1]
     slot = int((1.0 - z) * n)
     if slot >= n:
         slot = n - 1
     if slot < 0:
         slot = 0
-    k = ring_of[slot]
-    count = ring_counts[k]
+    k = sensor.ring_of[slot]
+    count = sensor.ring_counts[k]
     phi = math.atan2(y, x)
     j = int(math.floor(phi * count / (2.0 * math.pi) + 0.5))
     if j < 0:
         j += count
     if j >= count:
         j -= count
-    return ring_start[k] + j
+    return sensor.ring_start[k] + j
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _cell_indices(w, ring_counts, ring_start, ring_of):
+def _cell_indices(w, sensor):
     out = np.empty(w.shape[0], dtype=np.int64)
     for i in range(w.shape[0]):
-        out[i] = cell_index(w[i, 0], w[i, 1], w[i, 2], ring_counts, ring_start, ring_of)
+        out[i] = cell_index((w[i, 0], w[i, 1], w[i, 2]), sensor)
     return out

@@ -2,7 +2,8 @@
 
 Embree finds which triangle a ray hits; the triangle's shape then gives the exact surface
 point (the hit projected onto the analytic surface) and the analytic normal there. Every
-shape is a row of ``Shapes``: a kind code and up to ``N_PARAMS`` float64 parameters.
+shape is a row of ``Shapes``: a kind code and up to ``N_PARAMS`` float64 parameters. A code
+that :func:`surface_point` does not know is refused when ``Shapes`` is built.
 
 Kinds and parameters:
 
@@ -25,6 +26,7 @@ import numpy as np
 SPHERE = 0
 PLANE = 1
 ELLIPSOID = 2
+KINDS = {"sphere": SPHERE, "plane": PLANE, "ellipsoid": ELLIPSOID}
 N_PARAMS = 7
 
 
@@ -34,8 +36,13 @@ class Shapes:
 
     kind: np.ndarray  # (S,) int32
     params: np.ndarray  # (S, N_PARAMS) float64
-    material: np.ndarray  # (S,) int32 index into the scene's material table
+    material: np.ndarray  # (S,) int32 index into the scene's material table (set by SceneBuilder.add)
     size: np.ndarray  # (S,) float64 characteristic length, scales the ray offset
+
+    def __post_init__(self):
+        unknown = set(np.unique(self.kind).tolist()) - set(KINDS.values())
+        if unknown:
+            raise ValueError(f"shape kind codes {sorted(unknown)} unknown; known: {KINDS}")
 
     @classmethod
     def empty(cls) -> "Shapes":
@@ -56,52 +63,52 @@ class Shapes:
         )
 
     @staticmethod
-    def spheres(centres, radius, project_radius, material) -> "Shapes":
+    def spheres(centres, radius, project_radius) -> "Shapes":
         n = len(centres)
         params = np.zeros((n, N_PARAMS))
         params[:, 0:3] = centres
         params[:, 3] = radius
         params[:, 4] = project_radius
-        return Shapes(np.full(n, SPHERE, np.int32), params, np.full(n, material, np.int32), np.full(n, radius))
+        return Shapes(np.full(n, SPHERE, np.int32), params, np.zeros(n, np.int32), np.full(n, radius))
 
     @staticmethod
-    def planes(points, normals, material, size) -> "Shapes":
+    def planes(points, normals, size) -> "Shapes":
         n = len(points)
         params = np.zeros((n, N_PARAMS))
         params[:, 0:3] = points
         params[:, 3:6] = normals / np.linalg.norm(normals, axis=1)[:, None]
-        return Shapes(np.full(n, PLANE, np.int32), params, np.full(n, material, np.int32), np.full(n, size, float))
+        return Shapes(np.full(n, PLANE, np.int32), params, np.zeros(n, np.int32), np.full(n, size, float))
 
     @staticmethod
-    def ellipsoids(centres, semi_axes, project_scale, material) -> "Shapes":
+    def ellipsoids(centres, semi_axes, project_scale) -> "Shapes":
         n = len(centres)
         params = np.zeros((n, N_PARAMS))
         params[:, 0:3] = centres
         params[:, 3:6] = semi_axes
         params[:, 6] = project_scale
-        return Shapes(
-            np.full(n, ELLIPSOID, np.int32), params, np.full(n, material, np.int32), np.min(semi_axes, axis=1)
-        )
+        return Shapes(np.full(n, ELLIPSOID, np.int32), params, np.zeros(n, np.int32), np.min(semi_axes, axis=1))
 
 
 @numba.njit(cache=True, error_model="numpy")
-def surface_point(kind, prm, x, y, z):
-    """Project the hit (x, y, z) onto the analytic shape; return the point and unit normal."""
+def surface_point(kind, prm, h):
+    """Project the hit h = (x, y, z) onto the analytic shape; return the point and unit normal."""
+    x, y, z = h
     if kind == SPHERE:
         vx, vy, vz = x - prm[0], y - prm[1], z - prm[2]
         inv = 1.0 / math.sqrt(vx * vx + vy * vy + vz * vz)
         nx, ny, nz = vx * inv, vy * inv, vz * inv
         r = prm[4]
-        return prm[0] + r * nx, prm[1] + r * ny, prm[2] + r * nz, nx, ny, nz
+        return (prm[0] + r * nx, prm[1] + r * ny, prm[2] + r * nz), (nx, ny, nz)
     if kind == PLANE:
         nx, ny, nz = prm[3], prm[4], prm[5]
         d = (x - prm[0]) * nx + (y - prm[1]) * ny + (z - prm[2]) * nz
-        return x - d * nx, y - d * ny, z - d * nz, nx, ny, nz
-    # ELLIPSOID: radial projection in the frame where the ellipsoid is the unit sphere
-    ax, ay, az = prm[3], prm[4], prm[5]
-    ux, uy, uz = (x - prm[0]) / ax, (y - prm[1]) / ay, (z - prm[2]) / az
-    s = prm[6] / math.sqrt(ux * ux + uy * uy + uz * uz)
-    ux, uy, uz = ux * s, uy * s, uz * s
-    gx, gy, gz = ux / ax, uy / ay, uz / az
-    inv = 1.0 / math.sqrt(gx * gx + gy * gy + gz * gz)
-    return prm[0] + ux * ax, prm[1] + uy * ay, prm[2] + uz * az, gx * inv, gy * inv, gz * inv
+        return (x - d * nx, y - d * ny, z - d * nz), (nx, ny, nz)
+    if kind == ELLIPSOID:  # radial projection in the frame where the ellipsoid is the unit sphere
+        ax, ay, az = prm[3], prm[4], prm[5]
+        ux, uy, uz = (x - prm[0]) / ax, (y - prm[1]) / ay, (z - prm[2]) / az
+        s = prm[6] / math.sqrt(ux * ux + uy * uy + uz * uz)
+        ux, uy, uz = ux * s, uy * s, uz * s
+        gx, gy, gz = ux / ax, uy / ay, uz / az
+        inv = 1.0 / math.sqrt(gx * gx + gy * gy + gz * gz)
+        return (prm[0] + ux * ax, prm[1] + uy * ay, prm[2] + uz * az), (gx * inv, gy * inv, gz * inv)
+    raise ValueError("surface_point: unknown shape kind code")

@@ -34,6 +34,7 @@ import numpy as np
 
 from . import __version__
 from .frames import direction
+from .integrators.records import COUNT_NAMES, ENERGY_NAMES
 from .sensor import Sensor
 
 
@@ -87,20 +88,20 @@ def write(path: str | Path, result, config) -> Path:
             h5["sensor/projected_solid_angle"] = sensor.projected_solid_angle()
             h5["sensor/ring_counts"] = sensor.ring_counts
             h5["sensor"].attrs["cells_requested"] = plan.sensor_cells
-            exitance = result.exitance
-            h5["brdf"] = np.stack([e.mean[-1] for e in exitance])
-            h5["brdf_stderr"] = np.stack([e.stderr[-1] for e in exitance])
-            h5["brdf_order"] = np.stack([e.mean[:-1] for e in exitance])
-            h5["brdf_order_stderr"] = np.stack([e.stderr[:-1] for e in exitance])
+            brdf = result.brdf
+            h5["brdf"] = np.stack([e.mean[-1] for e in brdf])
+            h5["brdf_stderr"] = np.stack([e.stderr[-1] for e in brdf])
+            h5["brdf_order"] = np.stack([e.mean[:-1] for e in brdf])
+            h5["brdf_order_stderr"] = np.stack([e.stderr[:-1] for e in brdf])
             h5["albedo"] = np.array([a.mean[-1] for a in result.albedo])
             h5["albedo_stderr"] = np.array([a.stderr[-1] for a in result.albedo])
             h5["albedo_order"] = np.stack([a.mean[:-1] for a in result.albedo])
             h5["albedo_order_stderr"] = np.stack([a.stderr[:-1] for a in result.albedo])
-            for j, name in enumerate(("transmitted", "truncated", "absorbed", "balance")):
+            for j, name in enumerate((*ENERGY_NAMES, "balance")):
                 h5[f"energy/{name}"] = np.array([e.mean[j] for e in result.energy])
                 h5[f"energy/{name}_stderr"] = np.array([e.stderr[j] for e in result.energy])
             h5["paths"] = result.paths
-            for j, name in enumerate(("segments", "inside_hits", "roulette_kills")):
+            for j, name in enumerate(COUNT_NAMES):
                 h5[f"diagnostics/{name}"] = result.counts[:, j]
             scene = h5.create_group("scene")
             for key, value in plan.scene.items():

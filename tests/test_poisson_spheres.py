@@ -7,7 +7,8 @@ import pytest
 from scipy.spatial import cKDTree
 
 import geometry
-from microsim import config
+from microsim import config, materials
+from microsim.integrators.surface import embree_scene
 from microsim.rng import geometry_rng
 
 SPHERES = geometry.SCENES["poisson_spheres"]
@@ -61,7 +62,7 @@ def test_void_free_path_is_exponential_with_mean_l():
         points = points[cKDTree(centres).query(points)[0] > scene.shapes.params[0, 4]]  # outside every mesh
         d = rng.normal(size=points.shape)
         d /= np.linalg.norm(d, axis=1)[:, None]
-        hit = scene.embree().run(points.astype(np.float32), d.astype(np.float32),
+        hit = embree_scene(scene).run(points.astype(np.float32), d.astype(np.float32),
                                  dists=np.full(len(points), cap, np.float32), output=1)
         observed = hit["primID"] >= 0
         # censored exponential: maximum likelihood = total observed length / number of hits
@@ -110,5 +111,5 @@ def test_defaults_follow_the_free_path_and_are_recorded():
         assert 16.0 <= info["tile"] <= 64.0
     assert dilute["depth"] > dense["depth"] and dilute["tile"] > dense["tile"]
     white = SPHERES.resolve(scene_config(volume_fraction=0.3).model_copy(
-        update={"material": config.Lambert(kind="lambert", albedo=1.0)}))
+        update={"material": materials.Lambert(kind="lambert", albedo=1.0)}))
     assert white["optical_depth"] == SPHERES.MAX_OPTICAL_DEPTH

@@ -7,8 +7,8 @@ from microsim.shapes import ELLIPSOID, PLANE, SPHERE, Shapes, surface_point
 
 
 def project(shapes, k, points):
-    out = np.array([surface_point(shapes.kind[k], shapes.params[k], *p) for p in points])
-    return out[:, :3], out[:, 3:]
+    out = np.array([surface_point(shapes.kind[k], shapes.params[k], tuple(p)) for p in points])
+    return out[:, 0], out[:, 1]
 
 
 @pytest.fixture
@@ -18,7 +18,7 @@ def points():
 
 
 def test_sphere_projection_lies_on_the_projection_radius_with_the_radial_normal(points):
-    shapes = Shapes.spheres(np.array([[1.0, -2.0, 0.5]]), 1.0, 1.01, material=0)
+    shapes = Shapes.spheres(np.array([[1.0, -2.0, 0.5]]), 1.0, 1.01)
     assert shapes.kind[0] == SPHERE
     p, n = project(shapes, 0, points)
     radial = p - [1.0, -2.0, 0.5]
@@ -28,7 +28,7 @@ def test_sphere_projection_lies_on_the_projection_radius_with_the_radial_normal(
 
 def test_plane_projection_drops_the_point_along_the_normal(points):
     normal = np.array([[0.3, -0.2, 0.9]])
-    shapes = Shapes.planes(np.array([[0.0, 0.0, -1.0]]), normal, material=1, size=10.0)
+    shapes = Shapes.planes(np.array([[0.0, 0.0, -1.0]]), normal, size=10.0)
     assert shapes.kind[0] == PLANE
     p, n = project(shapes, 0, points)
     unit = normal[0] / np.linalg.norm(normal)
@@ -39,7 +39,7 @@ def test_plane_projection_drops_the_point_along_the_normal(points):
 
 def test_ellipsoid_projection_lies_on_the_scaled_surface_with_the_gradient_normal(points):
     centre, axes = np.array([1.0, -2.0, 0.5]), np.array([2.0, 0.5, 1.0])
-    shapes = Shapes.ellipsoids(centre[None], axes[None], 1.02, material=0)
+    shapes = Shapes.ellipsoids(centre[None], axes[None], 1.02)
     assert shapes.kind[0] == ELLIPSOID
     p, n = project(shapes, 0, points)
     u = (p - centre) / axes
@@ -47,3 +47,9 @@ def test_ellipsoid_projection_lies_on_the_scaled_surface_with_the_gradient_norma
     gradient = (p - centre) / axes**2
     assert np.allclose(n, gradient / np.linalg.norm(gradient, axis=1)[:, None], atol=1e-13)
     assert np.allclose(np.linalg.norm(n, axis=1), 1.0)
+
+
+def test_an_unknown_shape_kind_is_refused_when_the_shapes_are_built():
+    shapes = Shapes.spheres(np.zeros((1, 3)), 1.0, 1.0)
+    with pytest.raises(ValueError, match="shape kind codes \\[7\\] unknown"):
+        Shapes(np.array([7], np.int32), shapes.params, shapes.material, shapes.size)

@@ -1,0 +1,68 @@
+"""Per-path events that every integrator shares (numba kernels inlined into each tracer's loop).
+
+A path ``i`` is a row of a :class:`~microsim.integrators.records.Paths` bundle; the kernels
+update it and the batch's :class:`~microsim.integrators.records.Tally` in place:
+
+- :func:`exit_top`: the path leaves the surface; its weight is binned on the sensor, by order;
+- :func:`survives_interaction`: after an interaction, the path ends if it has no weight left,
+  is truncated at ``MAX_INTERACTIONS`` (its weight reported, never dropped), and plays Russian
+  roulette below ``ROULETTE_WEIGHT`` (unbiased: survivors carry ROULETTE_WEIGHT);
+- :func:`truncate`: the weight of a path cut short is reported as truncated;
+- :func:`move_path`: compaction of the live paths, every field of ``Paths`` at once.
+"""
+
+from __future__ import annotations
+
+import numba
+from numba import literal_unroll
+
+from ..rng import uniform
+from ..sensor import cell_index
+from .records import ORDERS, ROULETTE_KILLS, TRUNCATED
+
+#: Russian roulette: a path whose weight falls below this survives with probability weight / ROULETTE_WEIGHT
+ROULETTE_WEIGHT = 0.05
+#: a path scattered this many times is truncated (its weight is reported, never dropped)
+MAX_INTERACTIONS = 100_000
+#: a path that goes this many segments without an interaction (tile-side crossings, pass-throughs)
+#: is truncated: only a ray parallel to the surface in empty space could get there
+MAX_IDLE_SEGMENTS = 20_000
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def exit_top(paths, i, d, sensor, tally):
+    """Path i leaves along d: its weight goes to d's sensor cell, in the row of its order."""
+    cell = cell_index(d, sensor)
+    tally.exit_weight[min(paths.order[i], ORDERS) - 1, cell] += paths.weight[i]
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def truncate(paths, i, tally):
+    tally.energy[TRUNCATED] += paths.weight[i]
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def survives_interaction(paths, i, tally):
+    """Whether path i goes on after an interaction that set its weight and order (see module doc)."""
+    w = paths.weight[i]
+    if w <= 0.0:
+        return False
+    if paths.order[i] >= MAX_INTERACTIONS:
+        truncate(paths, i, tally)
+        return False
+    if w < ROULETTE_WEIGHT:
+        if uniform(paths.rng, i) * ROULETTE_WEIGHT < w:
+            paths.weight[i] = ROULETTE_WEIGHT
+        else:
+            tally.counts[ROULETTE_KILLS] += 1
+            return False
+    return True
+
+
+@numba.njit(cache=True, error_model="numpy")
+def move_path(paths, to, source):
+    """Copy every field of path ``source`` to row ``to`` (compaction of the live paths).
+
+    Not inlined by numba (literal_unroll does not survive its IR inlining); LLVM inlines it."""
+    for field in literal_unroll(paths):
+        field[to] = field[source]

@@ -1,0 +1,60 @@
+"""Named records of the tracer's state: structure-of-arrays bundles that numba kernels take.
+
+As pbrt-v4's wavefront work items and MCDC's records do, each bundle is a namedtuple of arrays
+(numba compiles a field access to a struct member, and can cache the kernels that take them
+because the classes live in this importable module). Kernels take a few bundles and a row
+index instead of dozens of arrays. A new per-path field is one entry of ``PATH_FIELDS``: it is
+allocated with the others and carried along when live paths are compacted
+(:func:`microsim.integrators.events.move_path`).
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+
+import numpy as np
+
+#: orders tallied separately: 1, 2, 3 and 4+ (CONVENTIONS 2)
+ORDERS = 4
+
+#: what a path carries from segment to segment: name -> dtype (one row per path)
+PATH_FIELDS = {
+    "weight": np.float64,
+    "order": np.int32,  # interactions so far
+    "idle": np.int32,  # segments since the last interaction (side wraps, pass-throughs)
+    "rng": np.uint64,  # state of the path's random stream (microsim.rng)
+}
+Paths = namedtuple("Paths", PATH_FIELDS)
+
+#: the segment each live path traces next, in float32 as Embree takes it: origin and direction
+#: (n, 3), the distance ``tfar`` to the end of the segment, and which boundary ends it (``end``)
+Rays = namedtuple("Rays", ["origin", "direction", "tfar", "end"])
+
+#: Embree's answer for each ray: the primitive hit (-1: none; then ``Rays.tfar`` is unchanged)
+#: and its unnormalised geometric normal (n, 3), float32; the hit distance is in ``Rays.tfar``
+Hits = namedtuple("Hits", ["prim", "normal"])
+
+#: what a batch of paths produced, sums of weights not yet divided by ``paths``: exits per order
+#: and sensor cell (ORDERS, n_cells), lost energy (N_ENERGY,) and event counts (N_COUNTS,)
+Tally = namedtuple("Tally", ["paths", "exit_weight", "energy", "counts"])
+
+#: indices of ``Tally.energy``
+TRANSMITTED, TRUNCATED, ABSORBED = 0, 1, 2
+ENERGY_NAMES = ("transmitted", "truncated", "absorbed")
+#: indices of ``Tally.counts``
+SEGMENTS, INSIDE_HITS, ROULETTE_KILLS = 0, 1, 2
+COUNT_NAMES = ("segments", "inside_hits", "roulette_kills")
+
+
+def allocate_paths(n: int) -> Paths:
+    return Paths(*(np.empty(n, dtype) for dtype in PATH_FIELDS.values()))
+
+
+def allocate_rays(n: int) -> Rays:
+    return Rays(np.empty((n, 3), np.float32), np.empty((n, 3), np.float32), np.empty(n, np.float32),
+                np.empty(n, np.int8))
+
+
+def empty_tally(paths: int, n_cells: int) -> Tally:
+    return Tally(paths, np.zeros((ORDERS, n_cells)), np.zeros(len(ENERGY_NAMES)),
+                 np.zeros(len(COUNT_NAMES), np.int64))
