@@ -1,7 +1,8 @@
 """Unpolarised Fresnel reflectance, shared by the tracer's materials and the analytic models.
 
 Scalar kernels are numba functions (callable from other kernels); the ``*_array`` forms are
-ufuncs over numpy arrays.
+ufuncs over numpy arrays. :func:`fresnel` is the one dispatch on the complex index
+``eta + i k`` that the models use: a dielectric when k = 0, a conductor otherwise.
 """
 
 import math
@@ -49,6 +50,18 @@ def fresnel_conductor(cos_i, eta, k):
     return 0.5 * (rs + rp)
 
 
+@numba.njit(cache=True, error_model="numpy")
+def fresnel(cos_i, eta, k):
+    """Reflectance of a smooth interface of complex relative index ``eta + i k`` (k >= 0).
+
+    :func:`fresnel_dielectric` when k = 0 (it covers eta < 1 and total internal reflection;
+    the conductor form equals it only for eta >= 1), :func:`fresnel_conductor` otherwise.
+    """
+    if k == 0.0:
+        return fresnel_dielectric(cos_i, eta)
+    return fresnel_conductor(cos_i, eta, k)
+
+
 @numba.vectorize(["float64(float64, float64)"], cache=True)
 def fresnel_dielectric_array(cos_i, eta):
     """Array form of :func:`fresnel_dielectric`."""
@@ -59,3 +72,9 @@ def fresnel_dielectric_array(cos_i, eta):
 def fresnel_conductor_array(cos_i, eta, k):
     """Array form of :func:`fresnel_conductor`."""
     return fresnel_conductor(cos_i, eta, k)
+
+
+@numba.vectorize(["float64(float64, float64, float64)"], cache=True)
+def fresnel_array(cos_i, eta, k):
+    """Array form of :func:`fresnel`."""
+    return fresnel(cos_i, eta, k)

@@ -12,7 +12,7 @@ import pytest
 from scipy.special import erf
 
 from microsim import models
-from microsim.fresnel import fresnel_dielectric_array
+from microsim.fresnel import fresnel, fresnel_array, fresnel_conductor_array, fresnel_dielectric_array
 from microsim.models import distributions as nd
 from microsim.models.microfacet import specular_brdf
 from microsim.frames import direction
@@ -294,6 +294,16 @@ def test_microfacet_matches_definition():
     f = fresnel_dielectric_array(np.sum(wi * h, axis=-1), 1.33)
     np.testing.assert_allclose(model(wi, wo), d * g * f / (4 * wi[:, 2] * wo[:, 2]), rtol=1e-12)
     np.testing.assert_allclose(specular_brdf(wi, wo, "ggx", 0.3, 0.1, "smith", 1.33), model(wi, wo), rtol=1e-15)
+
+
+@pytest.mark.parametrize("eta, k", [(1.5, 0.0), (0.7, 0.0), (1.0152, 6.6273), (0.2, 3.0)])
+def test_fresnel_dispatch_is_dielectric_for_k_zero_else_conductor(eta, k):
+    """microsim.fresnel.fresnel, the one dispatch every model uses, picks its branch exactly
+    (eta = 0.7: total internal reflection below the critical angle)."""
+    cos_i = np.linspace(0.0, 1.0, 101)
+    expected = fresnel_dielectric_array(cos_i, eta) if k == 0.0 else fresnel_conductor_array(cos_i, eta, k)
+    assert np.array_equal(fresnel_array(cos_i, eta, k), expected)
+    assert [fresnel(c, eta, k) for c in cos_i] == expected.tolist()
 
 
 def test_microfacet_finite_at_grazing_and_extremes():

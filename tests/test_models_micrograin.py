@@ -15,7 +15,7 @@ from scipy.integrate import quad
 from scipy.special import roots_legendre
 
 from microsim import models
-from microsim.fresnel import fresnel_dielectric_array
+from microsim.fresnel import fresnel_array
 from microsim.models import micrograin_geometry as geo
 from microsim.frames import direction
 from microsim.models.quadrature import directional_albedo
@@ -324,13 +324,13 @@ def _direct_grain_brdf(model, wi, wo, n):
     keep = (ci > 0.0) & (co > 0.0) & (d > 0.0)
     h = geo.unit_space_height(m[keep], p["beta_x"], p["beta_y"])
     g = geo.g_distant(wi, wo, h, p["tau0"], p["beta_x"], p["beta_y"], p["gaf"] == "correlated")
-    t = (1.0 - fresnel_dielectric_array(ci[keep], p["eta"])) * (1.0 - fresnel_dielectric_array(co[keep], p["eta"]))
+    t = (1.0 - fresnel_array(ci[keep], p["eta"], p["k"])) * (1.0 - fresnel_array(co[keep], p["eta"], p["k"]))
     diffuse = p["albedo"] / np.pi * np.sum(ci[keep] * co[keep] * d[keep] * g * t * weight[keep]) / (wi[2] * wo[2])
     hv = (wi + wo) / np.linalg.norm(wi + wo)
     h_half = geo.unit_space_height(hv, p["beta_x"], p["beta_y"])
     specular = (geo.ndf(hv, p["tau0"], p["beta_x"], p["beta_y"])
                 * geo.g_distant(wi, wo, h_half, p["tau0"], p["beta_x"], p["beta_y"], p["gaf"] == "correlated")
-                * fresnel_dielectric_array(hv @ wi, p["eta"]) / (4.0 * wi[2] * wo[2]))
+                * fresnel_array(hv @ wi, p["eta"], p["k"]) / (4.0 * wi[2] * wo[2]))
     return p["tau0"] * (diffuse + specular)
 
 

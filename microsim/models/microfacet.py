@@ -2,7 +2,7 @@
 
 interfaced_lambertian_microfacets.txt Eq. 3 (Cook-Torrance / Walter et al. 2007), with the
 NDFs and GAFs of :mod:`microsim.models.distributions` and the Fresnel reflectance of
-:mod:`microsim.fresnel`: a dielectric when ``k`` = 0 (exact unpolarised form, Eq. 7, total
+:func:`microsim.fresnel.fresnel`: a dielectric when ``k`` = 0 (exact unpolarised form, Eq. 7, total
 internal reflection for ``eta`` < 1), a conductor with complex index ``eta`` + i ``k``
 otherwise. Eq. 3 prints the denominator 4 |i.h| |o.h|; inserting the facet BRDF of Eq. 5,
 F delta(h, m) / (4 |i.h|^2), into Eq. 2 gives F D G |i.h| |o.h| / (4 |i.h|^2 |i.n| |o.n|)
@@ -14,16 +14,9 @@ Default ``eta`` = 1.5 (a typical glass / plastic dielectric, as in the configs' 
 
 import numpy as np
 
-from ..fresnel import fresnel_conductor_array, fresnel_dielectric_array
+from ..fresnel import fresnel_array
 from . import distributions as nd
 from .base import BRDFModel, Param, register
-
-
-def fresnel(cos_i, eta: float, k: float) -> np.ndarray:
-    """Unpolarised Fresnel reflectance: dielectric for k = 0, conductor otherwise."""
-    if k == 0.0:
-        return fresnel_dielectric_array(cos_i, eta)
-    return fresnel_conductor_array(cos_i, eta, k)
 
 
 def specular_brdf(wi, wo, distribution, roughness_x, roughness_y, gaf, eta, k=0.0) -> np.ndarray:
@@ -32,7 +25,7 @@ def specular_brdf(wi, wo, distribution, roughness_x, roughness_y, gaf, eta, k=0.
     h = h / np.linalg.norm(h, axis=-1, keepdims=True)
     d = nd.ndf(distribution, roughness_x, roughness_y, h)
     g = nd.masking_shadowing(gaf, distribution, roughness_x, roughness_y, wi, wo, h)
-    f = fresnel(np.sum(wi * h, axis=-1), eta, k)
+    f = fresnel_array(np.sum(wi * h, axis=-1), eta, k)
     return d * g * f / (4.0 * wi[:, 2] * wo[:, 2])
 
 

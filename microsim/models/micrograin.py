@@ -46,7 +46,7 @@ import math
 import numba
 import numpy as np
 
-from ..fresnel import fresnel_conductor, fresnel_dielectric
+from ..fresnel import fresnel
 from .base import BRDFModel, Param, register
 from .micrograin_geometry import end_graded_gauss_rule, ndf_value, shadowed_area
 
@@ -108,14 +108,6 @@ class MicrograinParams(BRDFModel):
     def setup(self) -> None:
         self.has_interface = self.k > 0.0 or self.eta != 1.0
         self.bulk_brdf = self.bulk_albedo / math.pi
-
-
-@numba.njit(cache=True)
-def fresnel(cos_i, eta, k):
-    """Unpolarised Fresnel reflectance of the grain interface (dielectric if k = 0)."""
-    if k > 0.0:
-        return fresnel_conductor(cos_i, eta, k)
-    return fresnel_dielectric(cos_i, eta)
 
 
 @numba.njit(cache=True)

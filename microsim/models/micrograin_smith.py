@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..fresnel import fresnel_conductor_array, fresnel_dielectric_array
+from ..fresnel import fresnel_array
 from .base import Param, register
 from .micrograin import MicrograinParams
 from .micrograin_geometry import ndf, pore_visibility, smith_lambda
@@ -51,18 +51,13 @@ class MicrograinSmith(MicrograinParams):
         "as recalled in papers/micrograin_bsdf_anisotropic.txt: Eq. 1-6, with Eq. 24-25 for tau_beta+"
     )
 
-    def _fresnel(self, cos_i):
-        if self.k > 0.0:
-            return fresnel_conductor_array(cos_i, self.eta, self.k)
-        return fresnel_dielectric_array(cos_i, self.eta)
-
     def _eval(self, wi, wo):
         mu_i = wi[:, 2]
         mu_o = wo[:, 2]
         bulk_weight = pore_visibility(wi, wo, self.tau0, self.beta_x, self.beta_y, correlated=False)
         grains = np.full(wi.shape[0], self.albedo / np.pi)
         if self.has_interface:
-            grains *= (1.0 - self._fresnel(mu_i)) * (1.0 - self._fresnel(mu_o))
+            grains *= (1.0 - fresnel_array(mu_i, self.eta, self.k)) * (1.0 - fresnel_array(mu_o, self.eta, self.k))
             hv = wi + wo
             hv /= np.linalg.norm(hv, axis=-1, keepdims=True)
             lambda_i = smith_lambda(wi, self.tau0, self.beta_x, self.beta_y)
@@ -72,6 +67,6 @@ class MicrograinSmith(MicrograinParams):
             else:
                 g = 1.0 / (1.0 + lambda_i + lambda_o)
             d = ndf(hv, self.tau0, self.beta_x, self.beta_y)
-            f = self._fresnel(np.sum(wi * hv, axis=-1))
+            f = fresnel_array(np.sum(wi * hv, axis=-1), self.eta, self.k)
             grains += d * g * f / (4.0 * mu_i) / mu_o
         return (1.0 - bulk_weight) * grains + bulk_weight * self.bulk_brdf
