@@ -30,6 +30,7 @@ import numpy as np
 
 from microsim import config as config_module
 from microsim import models, runner
+from microsim.boolean_model import free_path, number_density, radius_over_free_path
 from microsim.models.phase import phase_lambert_sphere
 from microsim.sensor import Sensor, cell_index
 
@@ -158,8 +159,8 @@ def brute_force(centres, tile, z_top, z_bottom, wi, n, seed, ring_counts, ring_s
 
 
 def brute_force_excess(phi, theta_deg, rays, realizations, cells, tile=24.0):
-    n = -math.log1p(-phi) / (4.0 / 3.0 * math.pi)
-    depth = math.log(1e3) / (n * math.pi)
+    n = number_density(phi)
+    depth = math.log(1e3) * free_path(phi)
     sensor = Sensor.build(cells)
     rng = np.random.default_rng(77)
     out = []
@@ -195,7 +196,7 @@ def main():
     for phi in args.phis:
         start = time.perf_counter()
         found = engine_comparison(phi, theta, args.paths, args.realizations, args.workers, 100)
-        rows.append((phi, 0.75 * -math.log1p(-phi), found))
+        rows.append((phi, radius_over_free_path(phi), found))
         print(f"{phi:6.3f} {rows[-1][1]:7.4f}  "
               + "  ".join(f"      {m:+.4f} / {p:+.4f}  {c:4.2f}" for m, p, c in found)
               + f"   {time.perf_counter() - start:.0f} s")
@@ -216,7 +217,7 @@ def main():
         line, = ax.plot(r_over_l, [r[2][j, 0] for r in rows], "o", label=f"engine, theta_i = {t:g} deg")
         ax.plot(r_over_l, [r[2][j, 1] for r in rows], "-", color=line.get_color(), lw=1)
     ax.plot([], [], "k-", lw=1, label="finite-size model (lines)")
-    ax.plot([0.75 * -math.log1p(-0.02)] * len(theta), brute, "k*", ms=10, label="brute force, exact spheres")
+    ax.plot([radius_over_free_path(0.02)] * len(theta), brute, "k*", ms=10, label="brute force, exact spheres")
     ax.axhline(0.03, color="r", lw=0.8, ls="--", label="3 % (acceptance d)")
     ax.set_xlabel("r / l = -3/4 ln(1 - phi)")
     ax.set_ylabel("median (order 1 / point scatterers) - 1")

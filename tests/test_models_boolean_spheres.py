@@ -7,6 +7,7 @@ import pytest
 from scipy.integrate import quad
 
 from microsim import models
+from microsim.boolean_model import number_density, radius_over_free_path
 from microsim.frames import direction
 from microsim.models.boolean_spheres import common_volume, finite_size_ratio, lit_visible_height, shadow_hiding
 
@@ -49,7 +50,7 @@ def test_shadow_hiding_default_nodes_are_converged(i, o):
     from retro to the grazing hot spot, where the tables' standard errors are >= 5e-3 relative."""
     a = direction(math.radians(i[0]), math.radians(i[1]))
     b = direction(math.radians(o[0]), math.radians(o[1]))
-    r_over_l = -0.75 * math.log1p(-0.04)
+    r_over_l = radius_over_free_path(0.04)
     assert shadow_hiding(a, b, r_over_l) == pytest.approx(shadow_hiding(a, b, r_over_l, 96, 128, 192), abs=2e-4)
 
 
@@ -77,8 +78,8 @@ def test_dilute_limit_is_radiative_transfer_and_retro_doubles():
 def test_normal_retro_matches_the_closed_form_and_grazing_retro_stays_below_the_doubling():
     """At normal retro the two cylinders coincide: V(h) = ball + half-cylinder below the top,
     pi h^3 / 3 for h < 1 and pi h - 2 pi / 3 below, so I = 2 r/l int exp(-n V) dh by quad."""
-    r_over_l = -0.75 * math.log1p(-0.02)
-    n = r_over_l / math.pi
+    r_over_l = radius_over_free_path(0.02)
+    n = number_density(0.02)
 
     def volume(h):
         ball = 4 * math.pi / 3 if h >= 1 else 2 * math.pi / 3 + math.pi * (h - h**3 / 3)
