@@ -15,6 +15,14 @@ from scipy.integrate import quad
 from scipy.special import roots_legendre
 
 from microsim import models
+from microsim.boolean_model import (
+    grain_density,
+    grain_extinction,
+    unit_space_direction,
+    unit_space_direction_array,
+    unit_space_height,
+    unit_space_height_array,
+)
 from microsim.fresnel import fresnel_array
 from microsim.models import micrograin_geometry as geo
 from microsim.frames import direction
@@ -42,6 +50,40 @@ def smith_case(case):
     return {key: value for key, value in case.items() if key != "gaf"}
 
 
+# ---------------------------------------------------------------- Boolean-model relations
+
+
+@pytest.mark.parametrize("tau0, beta_x, beta_y", [(1e-4, 1.0, 1.0), (0.3, 0.5, 2.0), (0.9999, 1e-3, 1e3)])
+def test_grain_density_gives_the_filling_factor(tau0, beta_x, beta_y):
+    """tau0 = 1 - exp(-rho pi / (beta_x beta_y)) (Eq. 8, CONVENTIONS 5.3) at rho = grain_density,
+    and lambda = pi rho in unit space (beta_x = beta_y = 1)."""
+    rho = grain_density(tau0, beta_x, beta_y)
+    assert -math.expm1(-rho * math.pi / (beta_x * beta_y)) == pytest.approx(tau0, rel=1e-12)
+    assert grain_extinction(tau0) == pytest.approx(math.pi * grain_density(tau0, 1.0, 1.0), rel=1e-15)
+
+
+def test_unit_space_maps_take_grains_to_unit_half_spheres():
+    """E maps the point p of the grain beta_x^2 x^2 + beta_y^2 y^2 + z^2 = 1 to q = E p on the unit
+    sphere: the true normal m ~ E^2 p has height h' = q_z, and a direction t tangent at p
+    (m.t = 0) stays tangent, t'.q = 0. The scalar kernels equal the array forms."""
+    rng = np.random.default_rng(4)
+    beta_x, beta_y = 0.4, 2.5
+    scale = np.array([beta_x, beta_y, 1.0])
+    q = random_directions(rng, 50, mu_min=0.0)
+    m = q * scale
+    m /= np.linalg.norm(m, axis=-1, keepdims=True)
+    heights = unit_space_height_array(m, beta_x, beta_y)
+    np.testing.assert_allclose(heights, q[:, 2], rtol=1e-13, atol=1e-15)
+    tangent = np.cross(m, rng.normal(size=q.shape))
+    tangent /= np.linalg.norm(tangent, axis=-1, keepdims=True)
+    mapped = unit_space_direction_array(tangent, beta_x, beta_y)
+    np.testing.assert_allclose(np.linalg.norm(mapped, axis=-1), 1.0, rtol=1e-15)
+    np.testing.assert_allclose(np.sum(mapped * q, axis=-1), 0.0, atol=1e-14)
+    for j in range(q.shape[0]):
+        assert unit_space_direction(*tangent[j], beta_x, beta_y) == tuple(mapped[j])
+        assert unit_space_height(*m[j], beta_x, beta_y) == heights[j]
+
+
 # ---------------------------------------------------------------- explicit geometry (test d)
 
 
@@ -67,12 +109,12 @@ def _ray_is_free(h, dx, dy, dz, cx, cy, n, bx2, by2):
 def _poisson_visibility(seed, n_void, tau0, beta_x, beta_y, h, d1, d2):
     """Counts (free, void, tried) for points (0, 0, h) among fresh Poisson grain layers.
 
-    Grains: centres Poisson with density rho = -ln(1 - tau0) beta_x beta_y / pi (CONVENTIONS 5.3)
+    Grains: centres Poisson with density rho = grain_density(tau0, beta_x, beta_y) (CONVENTIONS 5.3)
     in the box of every centre whose grain can contain the point or meet either ray below
     z = 1. A point inside a grain is rejected (G^dist is conditioned on the void, Eq. 16).
     """
     np.random.seed(seed)
-    rho = -math.log1p(-tau0) * beta_x * beta_y / math.pi
+    rho = grain_density(tau0, beta_x, beta_y)
     half_x = 1.0 / beta_x + (1.0 - h) * max(abs(d1[0]) / d1[2], abs(d2[0]) / d2[2])
     half_y = 1.0 / beta_y + (1.0 - h) * max(abs(d1[1]) / d1[2], abs(d2[1]) / d2[2])
     mean = rho * 4.0 * half_x * half_y
@@ -322,12 +364,12 @@ def _direct_grain_brdf(model, wi, wo, n):
     ci = np.maximum(m @ wi, 0.0)
     co = np.maximum(m @ wo, 0.0)
     keep = (ci > 0.0) & (co > 0.0) & (d > 0.0)
-    h = geo.unit_space_height(m[keep], p["beta_x"], p["beta_y"])
+    h = unit_space_height_array(m[keep], p["beta_x"], p["beta_y"])
     g = geo.g_distant(wi, wo, h, p["tau0"], p["beta_x"], p["beta_y"], p["gaf"] == "correlated")
     t = (1.0 - fresnel_array(ci[keep], p["eta"], p["k"])) * (1.0 - fresnel_array(co[keep], p["eta"], p["k"]))
     diffuse = p["albedo"] / np.pi * np.sum(ci[keep] * co[keep] * d[keep] * g * t * weight[keep]) / (wi[2] * wo[2])
     hv = (wi + wo) / np.linalg.norm(wi + wo)
-    h_half = geo.unit_space_height(hv, p["beta_x"], p["beta_y"])
+    h_half = unit_space_height_array(hv, p["beta_x"], p["beta_y"])
     specular = (geo.ndf(hv, p["tau0"], p["beta_x"], p["beta_y"])
                 * geo.g_distant(wi, wo, h_half, p["tau0"], p["beta_x"], p["beta_y"], p["gaf"] == "correlated")
                 * fresnel_array(hv @ wi, p["eta"], p["k"]) / (4.0 * wi[2] * wo[2]))
@@ -414,8 +456,8 @@ def _first_order_bound(tau0, params, wi, wo):
     G T <= 1), Lambda at tau0 -> 0 from test_smith_lambda_of_isolated_hemispheres.
     """
     bx, by = params["beta_x"], params["beta_y"]
-    mu_i = geo.unit_space_direction(wi, bx, by)[..., 2]
-    mu_o = geo.unit_space_direction(wo, bx, by)[..., 2]
+    mu_i = unit_space_direction_array(wi, bx, by)[..., 2]
+    mu_o = unit_space_direction_array(wo, bx, by)[..., 2]
     grains = params["albedo"] / np.pi * np.minimum((1.0 + mu_i) / (2.0 * mu_i) / wo[..., 2],
                                                    (1.0 + mu_o) / (2.0 * mu_o) / wi[..., 2])
     bulk = params["bulk_albedo"] / np.pi * (1.0 + 0.5 * (1.0 / mu_i + 1.0 / mu_o - 2.0))
@@ -442,8 +484,8 @@ def test_small_tau0_tends_to_the_bulk(params):
     slope = (f - bulk) / tau0
     slope_2 = (models.create("micrograin", tau0=2 * tau0, **params)(wi, wo) - bulk) / (2 * tau0)
     # second order: every tau0 dependence enters through lambda U / pi <= lambda (1 + U0 / pi)
-    mu_i = geo.unit_space_direction(wi, model.beta_x, model.beta_y)[..., 2]
-    mu_o = geo.unit_space_direction(wo, model.beta_x, model.beta_y)[..., 2]
+    mu_i = unit_space_direction_array(wi, model.beta_x, model.beta_y)[..., 2]
+    mu_o = unit_space_direction_array(wo, model.beta_x, model.beta_y)[..., 2]
     growth = 1.0 + 0.5 * (1.0 / mu_i + 1.0 / mu_o)
     assert np.all(np.abs(slope_2 - slope) <= 4.0 * tau0 * growth * coefficient)
 
@@ -471,7 +513,7 @@ def test_normal_incidence_and_view(beta):
     |E m'| = sqrt(beta^2 (1 - h^2) + h^2), p(h) = 2 lambda h exp(-lambda (1 - h^2)) / tau0 (the
     CDF of Eq. 13 in h); integrated here by adaptive quadrature."""
     tau0, kd, bulk_albedo = 0.4, 0.7, 0.2
-    lam = -math.log1p(-tau0)
+    lam = grain_extinction(tau0)
     mean, _ = quad(lambda h: 2 * lam * h * h * math.exp(-lam * (1 - h * h)) / tau0
                    / math.sqrt(beta**2 * (1 - h * h) + h * h), 0.0, 1.0, epsabs=1e-13, epsrel=1e-12)
     model = models.create("micrograin", tau0=tau0, beta=beta, albedo=kd, bulk="lambert", bulk_albedo=bulk_albedo)
@@ -486,8 +528,8 @@ def test_smith_model_weights():
     model = models.create("micrograin_smith", tau0=0.3, beta=2.0, albedo=0.9, bulk="lambert", bulk_albedo=0.1)
     wi = direction(np.radians(50.0), 0.0)
     wo = direction(np.radians(70.0), np.radians(120.0))
-    mu_i = float(geo.unit_space_direction(wi, 2.0, 2.0)[2])
-    mu_o = float(geo.unit_space_direction(wo, 2.0, 2.0)[2])
+    mu_i = float(unit_space_direction_array(wi, 2.0, 2.0)[2])
+    mu_o = float(unit_space_direction_array(wo, 2.0, 2.0)[2])
     bulk_weight = 0.7 ** (0.5 * (1.0 / mu_i + 1.0 / mu_o))
     expected = (1.0 - bulk_weight) * 0.9 / np.pi + bulk_weight * 0.1 / np.pi
     assert float(model(wi, wo)) == pytest.approx(expected, rel=1e-12)

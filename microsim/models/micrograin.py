@@ -46,6 +46,7 @@ import math
 import numba
 import numpy as np
 
+from ..boolean_model import grain_extinction, unit_space_direction, unit_space_height
 from ..fresnel import fresnel
 from .base import BRDFModel, Param, register
 from .micrograin_geometry import end_graded_gauss_rule, ndf_value, shadowed_area
@@ -250,26 +251,17 @@ def _azimuthal_integral(wi, wo, a, b, h, beta_x, beta_y, eta, k, interface, px, 
 
 
 @numba.njit(cache=True)
-def _unit_space(w, beta_x, beta_y):
-    v = np.empty(3)
-    v[0] = beta_x * w[0]
-    v[1] = beta_y * w[1]
-    v[2] = w[2]
-    return v / math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-
-
-@numba.njit(cache=True)
 def _micrograin_kernel(wi, wo, tau0, beta_x, beta_y, albedo, eta, k, interface, bulk_brdf, correlated, hx, hw, px, pw):
     """f(i, o) of Eq. 20 for pairs of directions (N, 3), both above the horizon."""
-    lam = -math.log1p(-tau0)
+    lam = grain_extinction(tau0)
     rate = lam / math.pi
     out = np.empty(wi.shape[0])
     edges = np.empty(4)
     for n in range(wi.shape[0]):
         i = wi[n]
         o = wo[n]
-        a = _unit_space(i, beta_x, beta_y)
-        b = _unit_space(o, beta_x, beta_y)
+        a = unit_space_direction(i[0], i[1], i[2], beta_x, beta_y)
+        b = unit_space_direction(o[0], o[1], o[2], beta_x, beta_y)
         grains = 0.0
         if albedo > 0.0:
             sa = math.sqrt(a[0] * a[0] + a[1] * a[1])
@@ -292,12 +284,13 @@ def _micrograin_kernel(wi, wo, tau0, beta_x, beta_y, albedo, eta, k, interface, 
                     diffuse += half * hw[q] * density * visible * azimuthal
             grains += albedo / math.pi * diffuse / i[2] / o[2]
         if interface:
-            hv = i + o
-            hv = hv / math.sqrt(hv[0] * hv[0] + hv[1] * hv[1] + hv[2] * hv[2])
-            hp = hv[2] / math.sqrt((hv[0] / beta_x) ** 2 + (hv[1] / beta_y) ** 2 + hv[2] * hv[2])
+            mx, my, mz = i[0] + o[0], i[1] + o[1], i[2] + o[2]
+            norm = math.sqrt(mx * mx + my * my + mz * mz)
+            mx, my, mz = mx / norm, my / norm, mz / norm
+            hp = unit_space_height(mx, my, mz, beta_x, beta_y)
             visible = math.exp(-rate * shadowed_area(a[0], a[1], a[2], b[0], b[1], b[2], hp, correlated))
-            cos_d = i[0] * hv[0] + i[1] * hv[1] + i[2] * hv[2]
-            d = ndf_value(hv[0], hv[1], hv[2], tau0, beta_x, beta_y)
+            cos_d = i[0] * mx + i[1] * my + i[2] * mz
+            d = ndf_value(mx, my, mz, tau0, beta_x, beta_y)
             grains += d * visible * fresnel(cos_d, eta, k) / (4.0 * i[2]) / o[2]
         pores = 0.0
         if bulk_brdf > 0.0:

@@ -3,7 +3,9 @@
 Paper: ``papers/micrograin_bsdf_anisotropic.txt``. Grains are half-ellipsoids of vertical
 semi-axis 1 and lateral semi-axes 1/beta_x, 1/beta_y whose centres are a Poisson process of
 density rho on the base plane z = 0 (CONVENTIONS 5.3), so that the covered fraction is
-``tau0 = 1 - exp(-rho pi / (beta_x beta_y))``.
+``tau0 = 1 - exp(-rho pi / (beta_x beta_y))``. That density, lambda and the unit-space maps
+below are the relations of the Boolean model in :mod:`microsim.boolean_model`, shared with the
+scene generator.
 
 Parametrisation. The paper takes spheres of radius r_s stretched laterally by 1/beta_x, 1/beta_y
 (Eq. 8) and then sets r_s = 1 (after Eq. 9): r_s is our vertical semi-axis, and beta is the
@@ -36,6 +38,8 @@ import math
 import numba
 import numpy as np
 
+from ..boolean_model import grain_extinction, unit_space_direction_array
+
 #: Gauss-Legendre order of the height integral of the Smith Lambda (micrograin_smith).
 LAMBDA_NODES = 32
 _TINY_COS = 1e-300
@@ -53,23 +57,6 @@ def end_graded_gauss_rule(n: int):
     return 0.5 * (3.0 * x - x**3), 1.5 * (1.0 - x * x) * w
 
 
-def extinction(tau0: float) -> float:
-    """lambda = -ln(1 - tau0) = pi rho' (Eq. 9 with r_s = 1, in unit space)."""
-    return -math.log1p(-tau0)
-
-
-def unit_space_direction(w: np.ndarray, beta_x: float, beta_y: float) -> np.ndarray:
-    """w' = E w / |E w| for directions w (..., 3) (Sec. 4.2, anisotropic GAF)."""
-    v = np.asarray(w, dtype=np.float64) * np.array([beta_x, beta_y, 1.0])
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
-
-
-def unit_space_height(m: np.ndarray, beta_x: float, beta_y: float) -> np.ndarray:
-    """h' = n . m' with m' = E^-1 m / |E^-1 m|: the height of the grain point of normal m."""
-    v = np.asarray(m, dtype=np.float64) / np.array([beta_x, beta_y, 1.0])
-    return v[..., 2] / np.linalg.norm(v, axis=-1)
-
-
 @numba.njit(cache=True)
 def ndf_value(mx, my, mz, tau0, beta_x, beta_y):
     """Micrograin NDF D(m) (Eq. 10-12) of a unit normal m, normalised: integral D (m.n) dm = 1.
@@ -80,7 +67,7 @@ def ndf_value(mx, my, mz, tau0, beta_x, beta_y):
     """
     if mz <= 0.0:
         return 0.0
-    lam = -math.log1p(-tau0)
+    lam = grain_extinction(tau0)
     cos2 = mz * mz
     slope2 = (mx / beta_x) ** 2 + (my / beta_y) ** 2
     denom = cos2 + slope2
@@ -282,15 +269,15 @@ def g_distant(wi, wo, h, tau0, beta_x, beta_y, correlated=True) -> np.ndarray:
     Eq. 19 itself has it (check: test_g1_distant_matches_ray_casting, anisotropic cases).
     ``wi``, ``wo`` (..., 3) true-space directions with z > 0; ``h`` broadcasts with them.
     """
-    a = unit_space_direction(wi, beta_x, beta_y)
-    b = unit_space_direction(wo, beta_x, beta_y)
+    a = unit_space_direction_array(wi, beta_x, beta_y)
+    b = unit_space_direction_array(wo, beta_x, beta_y)
     h = np.asarray(h, dtype=np.float64)
     shape = np.broadcast_shapes(a.shape[:-1], b.shape[:-1], h.shape)
     a = np.ascontiguousarray(np.broadcast_to(a, shape + (3,)).reshape(-1, 3))
     b = np.ascontiguousarray(np.broadcast_to(b, shape + (3,)).reshape(-1, 3))
     h = np.ascontiguousarray(np.broadcast_to(h, shape).reshape(-1))
     area = _shadowed_areas(a, b, h, correlated)
-    return np.exp(-extinction(tau0) / math.pi * area).reshape(shape)
+    return np.exp(-grain_extinction(tau0) / math.pi * area).reshape(shape)
 
 
 def g1_distant(w, h, tau0, beta_x, beta_y) -> np.ndarray:
@@ -314,10 +301,10 @@ def smith_lambda(w, tau0, beta_x, beta_y, nodes: int = LAMBDA_NODES) -> np.ndarr
     h) and a uniform azimuth. The azimuthal integral of (w.m)+ is closed-form; h >= sin(theta')
     is fully lit (closed form), h < sin(theta') uses ``end_graded_gauss_rule`` (32 nodes: 1e-10).
     """
-    wp = unit_space_direction(w, beta_x, beta_y)
+    wp = unit_space_direction_array(w, beta_x, beta_y)
     c = np.maximum(wp[..., 2], _TINY_COS)
     s = np.hypot(wp[..., 0], wp[..., 1])
-    lam = extinction(tau0)
+    lam = grain_extinction(tau0)
     lit = c * -np.expm1(-lam * c * c) / tau0
     x, wx = end_graded_gauss_rule(nodes)
     h = 0.5 * s[..., None] * (x + 1.0)
