@@ -31,7 +31,7 @@ import numpy as np
 from microsim import config as config_module
 from microsim import models, runner
 from microsim.boolean_model import free_path, number_density, radius_over_free_path
-from microsim.models.phase import phase_lambert_sphere
+from microsim.models.radiative_transfer import single_scattering
 from microsim.sensor import Sensor, cell_index
 
 OUT = Path(__file__).resolve().parent / "out"
@@ -40,7 +40,7 @@ RETRO_EXCLUSION_DEG = 10.0
 
 
 def rt_cell_average(sensor, wi):
-    return sensor.cell_average(lambda wo: ALBEDO * phase_lambert_sphere(-(wo @ wi)) / (wi[2] + wo[:, 2]), 6, 6)
+    return sensor.cell_average(lambda wo: single_scattering(wi, wo, ALBEDO), 6, 6)
 
 
 def away_from_retro(sensor, wi):

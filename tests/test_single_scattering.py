@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from microsim import models
-from microsim.models.phase import phase_lambert_sphere
+from microsim.models.radiative_transfer import single_scattering
 
 ALBEDO = 0.9
 REALIZATIONS = 16
@@ -41,7 +41,7 @@ def single_scattering_table(simulate, phi):
 
 def point_scatterers(sensor, wi):
     """c p(-wi.wo) / (mu_i + mu_o), Eq. 10, averaged over each cell (CONVENTIONS 2)."""
-    return sensor.cell_average(lambda wo: ALBEDO * phase_lambert_sphere(-(wo @ wi)) / (wi[2] + wo[:, 2]), 6, 6)
+    return sensor.cell_average(lambda wo: single_scattering(wi, wo, ALBEDO), 6, 6)
 
 
 def away_from_retro(table, wi):

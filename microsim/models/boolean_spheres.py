@@ -44,7 +44,7 @@ import numpy as np
 
 from ..boolean_model import radius_over_free_path
 from .base import BRDFModel, Param, register
-from .phase import phase_lambert_sphere
+from .radiative_transfer import single_scattering
 
 #: Midpoint nodes across the common part of the two cylinders (t) and along it inside the ball (s),
 #: and the depth grid of O(h).
@@ -236,5 +236,4 @@ class BooleanSpheresSingle(BRDFModel):
         self.r_over_l = radius_over_free_path(self.volume_fraction)
 
     def _eval(self, wi, wo):
-        rt = self.albedo * phase_lambert_sphere(-np.einsum("ij,ij->i", wi, wo)) / (wi[:, 2] + wo[:, 2])
-        return rt * finite_size_ratio(wi, wo, self.r_over_l)
+        return single_scattering(wi, wo, self.albedo) * finite_size_ratio(wi, wo, self.r_over_l)

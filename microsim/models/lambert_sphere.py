@@ -2,9 +2,10 @@
 
 Paper: lambert_sphere_brdf.txt. Accurate form, Eqs. 9-12 and 21:
 ``f = f1 + f_m^(0) + f_m^(1) cos(phi)`` where f1 is the exact single scattering with the exact
-phase function (Eq. 10, p(-wi.wo), Eq. 1) and ``f_m^(k) = f^(k) - f_1,3^(k)``: the Horak-
-Chandrasekhar Fourier modes of the three-term half space (f^(0) Eq. 30, f^(1) Eq. 22) minus the
-single scattering of the three-term phase function (Eqs. 38, 28); f_m^(2) = 0 (Eq. 21).
+phase function (Eq. 10, p(-wi.wo), Eq. 1; :mod:`microsim.models.radiative_transfer`) and
+``f_m^(k) = f^(k) - f_1,3^(k)``: the Horak-Chandrasekhar Fourier modes of the three-term half
+space (f^(0) Eq. 30, f^(1) Eq. 22) minus the single scattering of the three-term phase function
+(Eqs. 38, 28); f_m^(2) = 0 (Eq. 21).
 
 Azimuth: phi = phi_o - phi_i with phi = 0 the backscatter half plane (CONVENTIONS 1). The paper
 uses the same: its f^(1) (> 0) multiplies cos(phi), and the first mode of the single scattering of
@@ -38,7 +39,7 @@ import numpy as np
 
 from . import hfunctions
 from .base import BRDFModel, Param, register
-from .phase import phase_lambert_sphere
+from .radiative_transfer import single_scattering
 
 
 def albedo_from_kd(kd):
@@ -93,11 +94,6 @@ def zeroth_mode_constants_fit(c) -> dict:
         E=15.0 / 128.0 * (1.0 - c) * c * (4.0 * c / 3.0 + 3.0),
         F=(266.063 * s**3 - 21.9141 * s**2 - 242.16 * s - 1.9209) / (215.773 * s**2 + 457.42 * s + 1499.9),
     )
-
-
-def single_scattering(wi, wo, c):
-    """f1 = c p(-wi.wo) / (mu_i + mu_o), Eq. 10, exact Lambert-sphere phase function (Eq. 1)."""
-    return c * phase_lambert_sphere(-np.sum(wi * wo, axis=-1)) / (wi[..., 2] + wo[..., 2])
 
 
 def zeroth_mode_multiple(mu_i, mu_o, c, log_h_i, log_h_o, k: dict):
