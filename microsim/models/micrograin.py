@@ -59,8 +59,17 @@ TAU0_RANGE = (1e-4, 0.9999)
 BETA_RANGE = (1e-3, 1e3)
 
 
+#: The masking-shadowing choice of ``micrograin`` (Eq. 17-19), used in the grain terms and V_p alike.
+GAF = Param("gaf", "distant GAF: direction-correlated (Eq. 18) or not (Eq. 17), also in V_p", "correlated",
+            choices=("correlated", "uncorrelated"))
+_BETA = Param("beta", "grain height / lateral semi-axis, isotropic (sets beta_x = beta_y)", None, *BETA_RANGE)
+
+
 class MicrograinParams(BRDFModel):
     """Parameters shared by ``micrograin`` and ``micrograin_smith`` (not a registered model).
+
+    A model class adds its own choice of GAF, ``class Model(MicrograinParams, gaf=Param("gaf", ...))``,
+    after the shared parameters.
 
     tau0 in [1e-4, 0.9999]: at tau0 = 0 the model is its bulk and 0/0 appears in
     lambda / tau0; at tau0 = 1 lambda = -ln(1 - tau0) is infinite (no pores, grains touching
@@ -72,7 +81,7 @@ class MicrograinParams(BRDFModel):
 
     params = (
         Param("tau0", "filling factor: fraction of the base covered by grains (Eq. 8)", None, *TAU0_RANGE),
-        Param("beta", "grain height / lateral semi-axis, isotropic (sets beta_x = beta_y)", None, *BETA_RANGE),
+        _BETA,
         Param("beta_x", "grain height / lateral semi-axis along x", None, *BETA_RANGE),
         Param("beta_y", "grain height / lateral semi-axis along y", None, *BETA_RANGE),
         Param("albedo", "K_d, albedo of the Lambertian grain surface (0 for conductor grains)", None, 0.0, 1.0),
@@ -82,6 +91,10 @@ class MicrograinParams(BRDFModel):
         Param("bulk", "base plane under the grains", "absorber", choices=("absorber", "lambert")),
         Param("bulk_albedo", "albedo of the Lambertian base (bulk = lambert only)", None, 0.0, 1.0),
     )
+
+    def __init_subclass__(cls, gaf: Param, **kwargs):
+        super().__init_subclass__(**kwargs)
+        cls.params = MicrograinParams.params + (gaf,)
 
     def resolve(self, values: dict) -> dict:
         has_beta = "beta" in values
@@ -94,7 +107,7 @@ class MicrograinParams(BRDFModel):
             same = values["beta_x"] == values["beta_y"]
             values["beta"] = values["beta_x"] if same else None
         else:
-            raise ValueError(f"model {self.name!r} needs beta, or beta_x and beta_y, in {self.params[1].describe()}")
+            raise ValueError(f"model {self.name!r} needs beta, or beta_x and beta_y, in {_BETA.describe()}")
         if values.get("bulk", "absorber") == "lambert":
             if "bulk_albedo" not in values:
                 raise ValueError("bulk = 'lambert' needs bulk_albedo in [0, 1]")
@@ -300,12 +313,8 @@ def _micrograin_kernel(wi, wo, tau0, beta_x, beta_y, albedo, eta, k, interface, 
 
 
 @register
-class Micrograin(MicrograinParams):
+class Micrograin(MicrograinParams, gaf=GAF):
     name = "micrograin"
-    params = MicrograinParams.params + (
-        Param("gaf", "distant GAF: direction-correlated (Eq. 18) or not (Eq. 17), also in V_p", "correlated",
-              choices=("correlated", "uncorrelated")),
-    )
     reference = (
         "Lucas, Ribardiere, Pacanowski, Barla 2024, A Fully-correlated Anisotropic Micrograin BSDF Model "
         "(papers/micrograin_bsdf_anisotropic.txt): Eq. 8-12 (NDF), 16-19 and App. A-B (GAF), "

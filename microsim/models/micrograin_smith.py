@@ -38,14 +38,14 @@ from .base import Param, register
 from .micrograin import MicrograinParams
 from .micrograin_geometry import ndf, pore_visibility, smith_lambda
 
+#: The two Smith forms of the GAF (Lucas et al. 2023 use the separable one).
+GAF = Param("gaf", "Smith GAF: G1(i) G1(o), or height-correlated 1 / (1 + Lambda_i + Lambda_o)", "separable",
+            choices=("separable", "height_correlated"))
+
 
 @register
-class MicrograinSmith(MicrograinParams):
+class MicrograinSmith(MicrograinParams, gaf=GAF):
     name = "micrograin_smith"
-    params = MicrograinParams.params + (
-        Param("gaf", "Smith GAF: G1(i) G1(o), or height-correlated 1 / (1 + Lambda_i + Lambda_o)", "separable",
-              choices=("separable", "height_correlated")),
-    )
     reference = (
         "Lucas, Ribardiere, Pacanowski, Barla 2023, A Micrograin BSDF Model for the Rendering of Porous Layers, "
         "as recalled in papers/micrograin_bsdf_anisotropic.txt: Eq. 1-6, with Eq. 24-25 for tau_beta+"
