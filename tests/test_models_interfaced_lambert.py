@@ -13,17 +13,12 @@ from microsim.models.microfacet import specular_brdf
 from microsim.frames import direction
 from microsim.models.quadrature import directional_albedo
 
+from model_helpers import assert_rejected, assert_zero_below_horizon, random_pairs
+
 
 def _gl(n, a, b):
     x, w = np.polynomial.legendre.leggauss(n)
     return a + 0.5 * (b - a) * (x + 1.0), 0.5 * (b - a) * w
-
-
-def _pairs(n=2000, seed=4, top=89.9):
-    rng = np.random.default_rng(seed)
-    wi = direction(np.radians(rng.uniform(0, top, n)), rng.uniform(0, 2 * math.pi, n))
-    wo = direction(np.radians(rng.uniform(0, top, n)), rng.uniform(0, 2 * math.pi, n))
-    return wi, wo
 
 
 def r_e_by_quadrature(eta):
@@ -54,7 +49,7 @@ def test_external_reflectance_near_one():
 
 @pytest.mark.parametrize("albedo", [0.0, 0.4, 1.0])
 def test_flat_at_index_one_is_lambert(albedo):
-    wi, wo = _pairs()
+    wi, wo = random_pairs(2000, 4)
     model = models.create("interfaced_lambert", albedo=albedo, eta=1.0)
     np.testing.assert_allclose(model(wi, wo), models.create("lambert", albedo=albedo)(wi, wo), rtol=1e-15, atol=0.0)
     assert np.all(model.specular_delta_reflectance(wi) == 0.0)
@@ -87,19 +82,19 @@ def _rough_cases():
 def test_rough_reciprocal(params):
     model = models.create("interfaced_lambert", albedo=0.7, eta=1.5, **params)
     assert model.reciprocal
-    wi, wo = _pairs(1000)
+    wi, wo = random_pairs(1000, 4)
     np.testing.assert_allclose(model(wi, wo), model(wo, wi), rtol=1e-10, atol=0.0)
 
 
 def test_flat_reciprocal():
     model = models.create("interfaced_lambert", albedo=0.7, eta=1.5)
-    wi, wo = _pairs()
+    wi, wo = random_pairs(2000, 4)
     np.testing.assert_allclose(model(wi, wo), model(wo, wi), rtol=1e-14, atol=0.0)
 
 
 @pytest.mark.parametrize("params", [p for p in _rough_cases() if "roughness" in p])
 def test_zero_albedo_is_the_specular_microfacet_model(params):
-    wi, wo = _pairs(500)
+    wi, wo = random_pairs(500, 4)
     model = models.create("interfaced_lambert", albedo=0.0, eta=1.33, **params)
     np.testing.assert_array_equal(model(wi, wo), models.create("microfacet", eta=1.33, **params)(wi, wo))
 
@@ -156,7 +151,7 @@ def test_body_quadrature_against_independent_rule(params):
 def test_rough_tends_to_flat():
     """At the smallest roughness (1e-4) the body term is the flat one (Eq. 8 at m = n) to 1e-5
     (the deviation is O(roughness^2) plus the quadrature error; measured 2.2e-7)."""
-    wi, wo = _pairs(300, top=80.0)
+    wi, wo = random_pairs(300, 4, top=80.0)
     flat = models.create("interfaced_lambert", albedo=0.6, eta=1.5)
     rough = models.create("interfaced_lambert", albedo=0.6, eta=1.5, roughness=nd.ROUGHNESS_MIN)
     body = rough(wi, wo) - specular_brdf(wi, wo, "beckmann", nd.ROUGHNESS_MIN, nd.ROUGHNESS_MIN, "smith", 1.5)
@@ -235,8 +230,7 @@ def test_finite_at_grazing_and_extremes():
                 f = models.create("interfaced_lambert", albedo=albedo, eta=eta, distribution=dist, gaf=gaf, roughness=r)(wi, wo)
                 assert np.all(np.isfinite(f)) and np.all(f >= 0.0), (eta, albedo, dist, gaf, r)
     model = models.create("interfaced_lambert", albedo=0.5, roughness=0.3)
-    below = direction(np.radians(91.0))
-    assert model(below, direction(0.1)) == 0.0 and model(direction(0.1), below) == 0.0
+    assert_zero_below_horizon(model, direction(0.1), direction(np.radians(91.0)))
 
 
 @pytest.mark.parametrize(
@@ -257,7 +251,4 @@ def test_finite_at_grazing_and_extremes():
     ],
 )
 def test_bad_parameters(params, keys):
-    with pytest.raises(ValueError) as err:
-        models.create("interfaced_lambert", **params)
-    for key in keys:
-        assert key in str(err.value)
+    assert_rejected("interfaced_lambert", params, keys)

@@ -11,6 +11,8 @@ from microsim.models import vmf_diffuse as vmf
 from microsim.frames import direction
 from microsim.models.quadrature import directional_albedo, hemisphere_rule
 
+from model_helpers import assert_rejected, random_pairs
+
 ROUGHNESS = [0.0, 1e-6, 0.02, 0.0489, 0.05, 0.1, 0.2, 0.3, 0.352, 0.36, 0.5, 0.7, 0.9, 1.0 - 1e-12, 1.0]
 
 
@@ -99,16 +101,9 @@ def _lambert(albedo):
     return models.create("lambert", albedo=albedo)
 
 
-def _pairs(n=3000, seed=2, top=89.9):
-    rng = np.random.default_rng(seed)
-    wi = direction(np.radians(rng.uniform(0, top, n)), rng.uniform(0, 2 * math.pi, n))
-    wo = direction(np.radians(rng.uniform(0, top, n)), rng.uniform(0, 2 * math.pi, n))
-    return wi, wo
-
-
 @pytest.mark.parametrize("albedo", [0.0, 0.3, 0.8, 1.0])
 def test_zero_roughness_is_lambert(albedo):
-    wi, wo = _pairs()
+    wi, wo = random_pairs(3000, 2)
     lambert = _lambert(albedo)(wi, wo)
     for params in (dict(albedo=albedo), dict(kd=albedo)):
         f = models.create("vmf_diffuse", roughness=0.0, **params)(wi, wo)
@@ -119,7 +114,7 @@ def test_zero_roughness_is_lambert(albedo):
 def test_reciprocal(roughness):
     model = models.create("vmf_diffuse", albedo=0.7, roughness=roughness)
     assert model.reciprocal
-    wi, wo = _pairs()
+    wi, wo = random_pairs(3000, 2)
     np.testing.assert_allclose(model(wi, wo), model(wo, wi), rtol=1e-10, atol=0.0)
 
 
@@ -178,7 +173,7 @@ def test_directional_albedo_at_most_one_near_white():
 
 def test_orders_sum_to_brdf_and_vanish_below_horizon():
     model = models.create("vmf_diffuse", albedo=0.8, roughness=0.6)
-    wi, wo = _pairs(200)
+    wi, wo = random_pairs(200, 2)
     orders = model.orders(wi, wo)
     assert orders.shape == (4, 200)
     np.testing.assert_allclose(orders.sum(axis=0), model(wi, wo), rtol=1e-14)
@@ -248,7 +243,4 @@ def test_finite_at_grazing_and_extremes():
     ],
 )
 def test_bad_parameters(params, keys):
-    with pytest.raises(ValueError) as err:
-        models.create("vmf_diffuse", **params)
-    for key in keys:
-        assert key in str(err.value)
+    assert_rejected("vmf_diffuse", params, keys)
