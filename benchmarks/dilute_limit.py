@@ -64,8 +64,8 @@ def engine_comparison(phi, theta_deg, paths, realizations, workers, cells):
         ok = away_from_retro(result.sensor, wi)
         rt = rt_cell_average(result.sensor, wi)
         finite = result.sensor.cell_average(lambda wo: model(wi, wo), 6, 6)
-        order_1 = result.exitance[i].mean[0]
-        z = (order_1 - finite) / result.exitance[i].stderr[0]
+        order_1 = result.brdf[i].mean[0]
+        z = (order_1 - finite) / result.brdf[i].stderr[0]
         rows.append((np.median(order_1[ok] / rt[ok]) - 1.0, np.median(finite[ok] / rt[ok]) - 1.0, np.mean(z * z)))
     return np.array(rows)
 
@@ -113,7 +113,7 @@ def _wrap(v, d, tile):
 
 
 @numba.njit(cache=True)
-def brute_force(centres, tile, z_top, z_bottom, wi, n, seed, ring_counts, ring_start, ring_of, tally):
+def brute_force(centres, tile, z_top, z_bottom, wi, n, seed, sensor, tally):
     """Single scattering on exact spheres: first hit, Lambertian emission, unblocked exit binned."""
     np.random.seed(seed)
     for _ in range(n):
@@ -152,7 +152,7 @@ def brute_force(centres, tile, z_top, z_bottom, wi, n, seed, ring_counts, ring_s
             if j >= 0:
                 break
             if not side:
-                tally[cell_index(dx, dy, dz, ring_counts, ring_start, ring_of)] += ALBEDO
+                tally[cell_index((dx, dy, dz), sensor)] += ALBEDO
                 break
             ox, oy, oz = _wrap(ox + t * dx, dx, tile), _wrap(oy + t * dy, dy, tile), oz + t * dz
             skip = -1
@@ -172,8 +172,7 @@ def brute_force_excess(phi, theta_deg, rays, realizations, cells, tile=24.0):
             images = [centres + [sx * tile, sy * tile, 0] for sx in (-1, 0, 1) for sy in (-1, 0, 1)]
             everything = np.concatenate(images)
             near = np.all((everything[:, :2] > -1) & (everything[:, :2] < tile + 1), axis=1)
-            brute_force(everything[near], tile, 1.0, -depth - 1.5, wi, rays // realizations, r,
-                        sensor.ring_counts, sensor.ring_start, sensor.ring_of, tally)
+            brute_force(everything[near], tile, 1.0, -depth - 1.5, wi, rays // realizations, r, sensor, tally)
         f = tally / (rays // realizations * realizations) / sensor.projected_solid_angle()
         ok = away_from_retro(sensor, wi)
         out.append(np.median(f[ok] / rt_cell_average(sensor, wi)[ok]) - 1.0)
