@@ -6,8 +6,11 @@ tables of CONVENTIONS 4, validated by :mod:`microsim.config`), its kind ``code``
 row (the parameters in the order they are declared, read by position in :func:`scatter`) and
 its ``albedo_bound`` (used by generators for default slab depths). Defining a subclass
 registers it in ``MATERIALS``; the config schema, the scene's material table and the generators
-all derive from that registry. A new kind costs its definition and one branch of
-:func:`scatter`; a code without a branch is refused when a material table is built.
+all derive from that registry. Each definition is followed by the module constant of its code,
+the name :func:`scatter` compares with (numba reads module globals, not class attributes). A
+new kind costs its definition and one branch of :func:`scatter`; a code that no definition
+holds is refused when a material table is built, and :func:`scatter` raises rather than fall
+through.
 
 :func:`scatter` samples the outgoing direction of one interaction exactly (the sampled density
 equals BSDF * cos / weight) and returns the factor by which the path weight is multiplied; 0
@@ -84,6 +87,9 @@ class Absorber(Material):
         return 0.0
 
 
+ABSORBER = Absorber.code
+
+
 class Lambert(Material):
     """Lambertian reflector: cosine sampling about the shading normal, weight x albedo."""
 
@@ -93,6 +99,9 @@ class Lambert(Material):
 
     def albedo_bound(self) -> float:
         return self.albedo
+
+
+LAMBERT = Lambert.code
 
 
 class Conductor(Material):
@@ -107,6 +116,9 @@ class Conductor(Material):
     def albedo_bound(self) -> float:
         cosines = np.linspace(0.0, 1.0, _CONDUCTOR_PROBES)
         return float(max(fresnel_conductor(c, self.eta, self.k) for c in cosines))
+
+
+CONDUCTOR = Conductor.code
 
 
 class InterfacedLambert(Material):
@@ -126,8 +138,7 @@ class InterfacedLambert(Material):
         return min(1.0, f0 + (1.0 - f0) * self.albedo)
 
 
-ABSORBER, LAMBERT, CONDUCTOR, INTERFACED_LAMBERT = (Absorber.code, Lambert.code, Conductor.code,
-                                                    InterfacedLambert.code)
+INTERFACED_LAMBERT = InterfacedLambert.code
 
 
 @numba.njit(cache=True, error_model="numpy")

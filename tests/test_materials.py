@@ -4,6 +4,8 @@ import numpy as np
 import pytest
 
 from microsim.fresnel import fresnel_conductor, fresnel_dielectric
+from microsim.materials import MATERIALS, Absorber, Conductor, Lambert, codes, row_length, scatter
+from microsim.scene import MaterialTable
 
 
 def plane(material, theta, paths=200_000, cells=400):
@@ -54,3 +56,27 @@ def test_interfaced_lambert_diffuse_albedo_matches_the_flat_closed_form(simulate
 def test_absorber_plane_returns_nothing(simulate):
     t = simulate(plane({"kind": "absorber"}, [20.0], paths=1000))
     assert t.albedo[0] == 0.0 and t.arrays["energy/absorbed"][0] == 1.0
+
+
+def test_every_defined_material_has_a_scatter_branch():
+    """scatter raises for a code it has no branch for: every registered kind must have one."""
+    for name, definition in MATERIALS.items():
+        row = np.full(row_length(), 0.5)
+        direction, factor, cut = scatter(definition.code, row, np.zeros(1, np.uint64), 0, (0.0, 0.0, -1.0),
+                                         (0.0, 0.0, 1.0))
+        assert 0.0 <= factor <= 1.0 and 0.0 <= cut <= 1.0, name
+    unknown = max(codes()) + 1
+    with pytest.raises(ValueError, match="unknown material kind code"):
+        scatter(unknown, np.zeros(row_length()), np.zeros(1, np.uint64), 0, (0.0, 0.0, -1.0), (0.0, 0.0, 1.0))
+
+
+def test_an_unknown_material_code_is_refused_when_the_table_is_built():
+    table = MaterialTable.of([Lambert(kind="lambert", albedo=0.5)])
+    with pytest.raises(ValueError, match="material kind codes \\[99\\] unknown"):
+        MaterialTable(np.array([99], np.int32), table.params)
+
+
+def test_a_material_row_holds_the_parameters_in_declaration_order():
+    table = MaterialTable.of([Conductor(kind="conductor", eta=0.2, k=3.0), Absorber(kind="absorber")])
+    assert table.kind.tolist() == [Conductor.code, Absorber.code]
+    assert table.params.tolist() == [[0.2, 3.0], [0.0, 0.0]]
