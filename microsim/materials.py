@@ -141,6 +141,19 @@ class InterfacedLambert(Material):
 INTERFACED_LAMBERT = InterfacedLambert.code
 
 
+class Mirror(Material):
+    """The perfect conductor (CONVENTIONS 4): mirror reflection with F = 1 at every angle."""
+
+    kind: Literal["mirror"]
+    code: ClassVar[int] = 4
+
+    def albedo_bound(self) -> float:
+        return 1.0
+
+
+MIRROR = Mirror.code
+
+
 @numba.njit(cache=True, error_model="numpy")
 def scatter(kind, prm, states, i, d, n):
     """One interaction: returns (new direction, weight factor, truncated weight fraction).
@@ -156,6 +169,8 @@ def scatter(kind, prm, states, i, d, n):
         return reflect(d, n), fresnel_conductor(cos_i, prm[0], prm[1]), 0.0
     if kind == INTERFACED_LAMBERT:
         return _interfaced_lambert(prm[0], prm[1], states, i, d, n)
+    if kind == MIRROR:
+        return reflect(d, n), 1.0, 0.0
     if kind == ABSORBER:
         return d, 0.0, 0.0
     raise ValueError("scatter: unknown material kind code")

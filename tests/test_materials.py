@@ -80,3 +80,31 @@ def test_a_material_row_holds_the_parameters_in_declaration_order():
     table = MaterialTable.of([Conductor(kind="conductor", eta=0.2, k=3.0), Absorber(kind="absorber")])
     assert table.kind.tolist() == [Conductor.code, Absorber.code]
     assert table.params.tolist() == [[0.2, 3.0], [0.0, 0.0]]
+
+
+def test_mirror_plane_sends_every_path_to_the_specular_cell_with_weight_1(simulate):
+    t = simulate(plane({"kind": "mirror"}, [0.0, 40.0, 89.0], paths=2000))
+    for i, wi in enumerate(t.wi):
+        specular = t.sensor.lookup(np.array([[-wi[0], -wi[1], wi[2]]]))[0]
+        assert list(np.flatnonzero(t.brdf[i])) == [specular]
+    assert np.all(t.albedo == 1.0) and np.all(t.arrays["energy/absorbed"] == 0.0)
+
+
+def test_a_closed_scene_of_mirror_spheres_over_a_mirror_base_returns_all_its_energy(simulate):
+    t = simulate({
+        "scene": {"kind": "poisson_spheres", "volume_fraction": 0.3, "tile": 16.0, "depth": 6.0},
+        "material": {"kind": "mirror"}, "base": {"kind": "mirror"},
+        "illumination": {"theta_i_deg": [0.0, 60.0, 85.0]}, "sensor": {"cells": 400},
+        "run": {"paths": 20_000, "realizations": 4, "seed": 5},
+    })
+    a = t.arrays
+    assert np.all(a["energy/absorbed"] == 0.0) and np.all(t.transmitted == 0.0)
+    assert np.all(np.abs(t.albedo + t.truncated - 1.0) <= 1e-12)  # every path keeps weight 1
+    assert np.all(t.brdf_order[:, 1:, :].sum(axis=(1, 2)) > 0)  # inter-reflections happen
+
+
+def test_mirror_takes_no_parameters(simulate):
+    from microsim import config
+
+    with pytest.raises(config.ConfigError, match="material.eta: unknown key"):
+        simulate(plane({"kind": "mirror", "eta": 1.5}, [0.0]))
