@@ -1,0 +1,96 @@
+"""Bit identity: two small tables traced now equal, byte for byte, the golden ones checked in.
+
+``tests/data/golden_<name>.npz`` holds every dataset of the table that ``GOLDEN[name]`` gave
+when it was last regenerated (x86-64 with AVX-512, numba 0.68, Embree 4 of embreex 4.4). Between
+them the two configs reach every tracer event: Lambertian, interfaced-Lambertian and conductor
+interactions, Russian roulette, pass-through of overlapping spheres, side wraps, a base plane,
+transmission through the slab and truncation by ``max_order``. Any change that moves a single
+bit of a table fails here, with the size of the largest move. A change meant to move results
+(new physics, another sampling order) regenerates them, and its commit message says why:
+
+    python tests/test_golden.py --regenerate
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from microsim import config, runner, tables
+
+DATA = Path(__file__).parent / "data"
+
+GOLDEN = {
+    "spheres": {
+        "scene": {"kind": "poisson_spheres", "volume_fraction": 0.3, "tile": 8.0, "depth": 4.0, "subdivisions": 1},
+        "material": {"kind": "lambert", "albedo": 0.9},
+        "base": {"kind": "interfaced_lambert", "albedo": 0.7, "eta": 1.5},
+        "illumination": {"theta_i_deg": [0.0, 70.0]},
+        "sensor": {"cells": 20},
+        "run": {"paths": 4000, "realizations": 2, "seed": 3},
+    },
+    "conductor": {
+        "scene": {"kind": "poisson_spheres", "volume_fraction": 0.4, "tile": 8.0, "depth": 3.0, "subdivisions": 1},
+        "material": {"kind": "conductor", "eta": 0.2, "k": 3.0},
+        "illumination": {"theta_i_deg": [30.0, 85.0]},
+        "sensor": {"cells": 20},
+        "run": {"paths": 2000, "realizations": 2, "seed": 4, "max_order": 3},
+    },
+}
+
+
+def trace(name: str, directory: Path) -> dict:
+    """Every dataset of the table of GOLDEN[name], by HDF5 path."""
+    cfg = config.validate(GOLDEN[name])
+    path = directory / f"{name}.h5"
+    tables.write(path, runner.run(cfg), cfg)
+    return tables.load(path).arrays
+
+
+def golden_path(name: str) -> Path:
+    return DATA / f"golden_{name}.npz"
+
+
+def load_golden(name: str) -> dict:
+    with np.load(golden_path(name)) as stored:
+        return {key.replace(".", "/"): stored[key] for key in stored.files}
+
+
+@pytest.mark.parametrize("name", sorted(GOLDEN))
+def test_table_is_bit_identical_to_the_golden_one(name, tmp_path):
+    now, golden = trace(name, tmp_path), load_golden(name)
+    assert now.keys() == golden.keys()
+    moved = []
+    for key, expected in golden.items():
+        value = now[key]
+        if value.dtype != expected.dtype or value.shape != expected.shape or value.tobytes() != expected.tobytes():
+            largest = np.max(np.abs(value.astype(float) - expected.astype(float))) if value.shape == expected.shape else "shape"
+            moved.append(f"{key} (largest change {largest})")
+    assert not moved, "moved: " + ", ".join(moved)
+
+
+def test_the_golden_tables_reach_every_tracer_event():
+    spheres, conductor = load_golden("spheres"), load_golden("conductor")
+    assert np.all(spheres["diagnostics/roulette_kills"] > 0) and np.all(spheres["diagnostics/inside_hits"] > 0)
+    assert np.all(conductor["energy/transmitted"] > 0) and np.all(conductor["energy/truncated"] > 0)
+    assert np.all(spheres["albedo_order"][:, 3] > 0)  # paths reach order 4+
+
+
+def regenerate() -> None:
+    import tempfile
+
+    DATA.mkdir(exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in GOLDEN:
+            arrays = trace(name, Path(tmp))
+            np.savez_compressed(golden_path(name), **{key.replace("/", "."): value for key, value in arrays.items()})
+            print(f"wrote {golden_path(name)} ({golden_path(name).stat().st_size} bytes)")
+
+
+if __name__ == "__main__":
+    if sys.argv[1:] != ["--regenerate"]:
+        sys.exit("usage: python tests/test_golden.py --regenerate")
+    regenerate()
