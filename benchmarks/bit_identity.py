@@ -26,196 +26,52 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from microsim.tables import dict_to_toml
+
 ROOT = Path(__file__).resolve().parent.parent
 PROVENANCE = {"created_utc", "wall_time_s"}
 SHIPPED_PATHS = 20_000
 
-#: name -> (TOML text, extra command-line flags); the test configs of tests/, in TOML
+
+def config(scene: dict, material: dict, theta: list, cells: int, run: dict, base: dict | None = None) -> dict:
+    data = {"scene": scene, "material": material, "illumination": {"theta_i_deg": theta},
+            "sensor": {"cells": cells}, "run": run}
+    return data if base is None else dict(data, base=base)
+
+
+SPHERES_030 = {"kind": "poisson_spheres", "volume_fraction": 0.3, "tile": 16.0, "depth": 10.0}
+LAMBERT_08 = {"kind": "lambert", "albedo": 0.8}
+CONDUCTOR = {"kind": "conductor", "eta": 0.2, "k": 3.0}
+INTERFACED = {"kind": "interfaced_lambert", "albedo": 0.7, "eta": 1.5}
+PLANE = {"kind": "plane"}
+
+#: name -> (config, extra command-line flags): the configs of the tests in tests/
 TEST_CONFIGS = {
-    "furnace": ("""
-[scene]
-kind = "poisson_spheres"
-volume_fraction = 0.3
-tile = 16.0
-depth = 10.0
-[material]
-kind = "lambert"
-albedo = 1.0
-[base]
-kind = "lambert"
-albedo = 1.0
-[illumination]
-theta_i_deg = [0.0, 45.0, 70.0, 85.0]
-[sensor]
-cells = 400
-[run]
-paths = 40_000
-realizations = 8
-seed = 7
-""", []),
-    "roulette-transmitted": ("""
-[scene]
-kind = "poisson_spheres"
-volume_fraction = 0.3
-tile = 16.0
-depth = 10.0
-[material]
-kind = "lambert"
-albedo = 0.9
-[illumination]
-theta_i_deg = [0.0, 60.0, 89.9]
-[sensor]
-cells = 400
-[run]
-paths = 40_000
-realizations = 8
-seed = 7
-""", []),
-    "max-order-2": ("""
-[scene]
-kind = "poisson_spheres"
-volume_fraction = 0.3
-tile = 16.0
-depth = 10.0
-[material]
-kind = "lambert"
-albedo = 0.8
-[illumination]
-theta_i_deg = [30.0]
-[sensor]
-cells = 400
-[run]
-paths = 40_000
-realizations = 8
-seed = 7
-max_order = 2
-""", []),
-    "reciprocity-2-workers": ("""
-[scene]
-kind = "poisson_spheres"
-volume_fraction = 0.3
-tile = 16.0
-depth = 16.0
-[material]
-kind = "lambert"
-albedo = 0.8
-[illumination]
-theta_i_deg = [10.0, 35.0, 55.0, 75.0, 85.0]
-[sensor]
-cells = 300
-[run]
-paths = 40_000
-realizations = 16
-seed = 11
-""", ["--workers", "2"]),
-    "single-scattering-phi002": ("""
-[scene]
-kind = "poisson_spheres"
-volume_fraction = 0.02
-[material]
-kind = "lambert"
-albedo = 0.9
-[illumination]
-theta_i_deg = [0.0, 30.0, 60.0]
-[sensor]
-cells = 100
-[run]
-paths = 64_000
-realizations = 16
-seed = 3
-max_order = 1
-""", []),
-    "conductor-spheres-lambert-base": ("""
-[scene]
-kind = "poisson_spheres"
-volume_fraction = 0.2
-tile = 12.0
-depth = 6.0
-mesh_error = 0.05
-[material]
-kind = "conductor"
-eta = 0.2
-k = 3.0
-[base]
-kind = "lambert"
-albedo = 0.5
-[illumination]
-theta_i_deg = [0.0, 50.0, 80.0]
-[sensor]
-cells = 300
-[run]
-paths = 20_000
-realizations = 4
-seed = 9
-""", []),
-    "interfaced-spheres-absorber-base": ("""
-[scene]
-kind = "poisson_spheres"
-volume_fraction = 0.4
-tile = 12.0
-depth = 6.0
-subdivisions = 1
-[material]
-kind = "interfaced_lambert"
-albedo = 0.7
-eta = 1.5
-[base]
-kind = "absorber"
-[illumination]
-theta_i_deg = [0.0, 70.0]
-[sensor]
-cells = 300
-[run]
-paths = 20_000
-realizations = 4
-seed = 4
-""", []),
-    "plane-conductor": ("""
-[scene]
-kind = "plane"
-[material]
-kind = "conductor"
-eta = 0.2
-k = 3.0
-[illumination]
-theta_i_deg = [0.0, 40.0, 75.0]
-[sensor]
-cells = 400
-[run]
-paths = 2000
-realizations = 64
-seed = 2
-""", []),
-    "plane-interfaced-lambert": ("""
-[scene]
-kind = "plane"
-[material]
-kind = "interfaced_lambert"
-albedo = 0.7
-eta = 1.5
-[illumination]
-theta_i_deg = [0.0, 60.0, 89.0]
-[sensor]
-cells = 400
-[run]
-paths = 40_000
-realizations = 64
-seed = 2
-""", []),
-    "plane-absorber": ("""
-[scene]
-kind = "plane"
-[material]
-kind = "absorber"
-[illumination]
-theta_i_deg = [20.0]
-[sensor]
-cells = 400
-[run]
-paths = 1000
-realizations = 64
-seed = 2
-""", []),
+    "furnace": (config(SPHERES_030, {"kind": "lambert", "albedo": 1.0}, [0.0, 45.0, 70.0, 85.0], 400,
+                       {"paths": 40_000, "realizations": 8, "seed": 7}, base={"kind": "lambert", "albedo": 1.0}), []),
+    "roulette-transmitted": (config(SPHERES_030, {"kind": "lambert", "albedo": 0.9}, [0.0, 60.0, 89.9], 400,
+                                    {"paths": 40_000, "realizations": 8, "seed": 7}), []),
+    "max-order-2": (config(SPHERES_030, LAMBERT_08, [30.0], 400,
+                           {"paths": 40_000, "realizations": 8, "seed": 7, "max_order": 2}), []),
+    "reciprocity-2-workers": (config(dict(SPHERES_030, depth=16.0), LAMBERT_08, [10.0, 35.0, 55.0, 75.0, 85.0], 300,
+                                     {"paths": 40_000, "realizations": 16, "seed": 11}), ["--workers", "2"]),
+    "single-scattering-phi002": (config({"kind": "poisson_spheres", "volume_fraction": 0.02},
+                                        {"kind": "lambert", "albedo": 0.9}, [0.0, 30.0, 60.0], 100,
+                                        {"paths": 64_000, "realizations": 16, "seed": 3, "max_order": 1}), []),
+    "conductor-spheres-lambert-base": (
+        config({"kind": "poisson_spheres", "volume_fraction": 0.2, "tile": 12.0, "depth": 6.0, "mesh_error": 0.05},
+               CONDUCTOR, [0.0, 50.0, 80.0], 300, {"paths": 20_000, "realizations": 4, "seed": 9},
+               base={"kind": "lambert", "albedo": 0.5}), []),
+    "interfaced-spheres-absorber-base": (
+        config({"kind": "poisson_spheres", "volume_fraction": 0.4, "tile": 12.0, "depth": 6.0, "subdivisions": 1},
+               INTERFACED, [0.0, 70.0], 300, {"paths": 20_000, "realizations": 4, "seed": 4},
+               base={"kind": "absorber"}), []),
+    "plane-conductor": (config(PLANE, CONDUCTOR, [0.0, 40.0, 75.0], 400,
+                               {"paths": 2000, "realizations": 64, "seed": 2}), []),
+    "plane-interfaced-lambert": (config(PLANE, INTERFACED, [0.0, 60.0, 89.0], 400,
+                                        {"paths": 40_000, "realizations": 64, "seed": 2}), []),
+    "plane-absorber": (config(PLANE, {"kind": "absorber"}, [20.0], 400,
+                              {"paths": 1000, "realizations": 64, "seed": 2}), []),
 }
 
 
@@ -224,9 +80,9 @@ def jobs(config_dir: Path) -> dict[str, list[str]]:
     out = {}
     for path in sorted((ROOT / "runs").glob("*.toml")):
         out[f"runs/{path.name}"] = [str(path), "--paths", str(SHIPPED_PATHS)]
-    for name, (text, flags) in TEST_CONFIGS.items():
+    for name, (data, flags) in TEST_CONFIGS.items():
         path = config_dir / f"{name}.toml"
-        path.write_text(text)
+        path.write_text(dict_to_toml(data))
         out[name] = [str(path), *flags]
     return out
 

@@ -10,6 +10,8 @@ from microsim.schema import Section
 
 KIND = "plane"
 INTEGRATOR = "surface"
+#: paths start and leave this fraction of the tile above the plane
+TOP_HEIGHT = 1e-2
 
 
 class Config(Section):
@@ -24,7 +26,7 @@ def check(config) -> None:
 
 def resolve(config) -> dict:
     tile = config.scene.tile
-    return {"kind": KIND, "tile": tile, "z_top": 1e-2 * tile, "z_bottom": -tile}
+    return {"kind": KIND, "tile": tile, "z_top": TOP_HEIGHT * tile, "z_bottom": -tile}
 
 
 def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:

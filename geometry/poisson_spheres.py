@@ -58,6 +58,8 @@ TILE_FREE_PATHS = 3.0
 TILE_RANGE = (16.0, 64.0)
 DEFAULT_MESH_ERROR = 0.01
 MAX_SUBDIVISIONS = 6
+#: the slab's top and bottom lie this far (radii) beyond the highest and lowest mesh point
+SLAB_MARGIN = 1e-3
 
 
 class Config(Section):
@@ -148,8 +150,8 @@ def resolve(config) -> dict:
         "expected_spheres": n * tile * tile * depth,
         "base": config.base.kind if config.base is not None else "none",
         "base_z": -depth - vertex_radius,
-        "z_top": vertex_radius + 1e-3,
-        "z_bottom": -depth - vertex_radius - 1e-3,
+        "z_top": vertex_radius + SLAB_MARGIN,
+        "z_bottom": -depth - vertex_radius - SLAB_MARGIN,
     }
 
 

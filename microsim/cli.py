@@ -14,6 +14,7 @@ from pathlib import Path
 import click
 
 from . import config as config_module
+from .compare import ORDER_ROWS
 
 EXIT_BAD_INPUT = 2
 
@@ -68,7 +69,7 @@ def run(config_path, out, workers, paths, seed, force):
 @click.argument("table_path", metavar="TABLE.h5", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--model", "model_name", required=True, help="analytic model (see `microsim models`)")
 @click.option("--param", "params", multiple=True, metavar="KEY=VALUE", help="model parameter, repeatable")
-@click.option("--order", type=click.Choice(["all", "1", "2", "3", "4+"]), default="all", show_default=True,
+@click.option("--order", type=click.Choice(list(ORDER_ROWS)), default="all", show_default=True,
               help="compare with one scattering order of the table")
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object")
 @click.option("--plot", "plot_dir", type=click.Path(file_okay=False, path_type=Path),

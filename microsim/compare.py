@@ -21,7 +21,8 @@ import numpy as np
 QUADRATURE_TOLERANCE = 0.05
 QUADRATURE_RULES = (4, 8, 16, 32)
 SIGNAL_TO_NOISE = 3.0
-ORDERS = {"all": None, "1": 0, "2": 1, "3": 2, "4+": 3}
+#: --order choice -> row of the table's brdf_order (None: all orders, the table's brdf)
+ORDER_ROWS = {"all": None, "1": 0, "2": 1, "3": 2, "4+": 3}
 
 
 @dataclass
@@ -103,9 +104,9 @@ def cell_averages(model, sensor, wi: np.ndarray, stderr: np.ndarray):
 
 def compare(table, model, order: str = "all") -> Comparison:
     """Average ``model`` over the cells of ``table`` (a :class:`microsim.tables.Table`) and compare."""
-    if order not in ORDERS:
-        raise ValueError(f"order {order!r}; accepted: {', '.join(ORDERS)}")
-    row = ORDERS[order]
+    if order not in ORDER_ROWS:
+        raise ValueError(f"order {order!r}; accepted: {', '.join(ORDER_ROWS)}")
+    row = ORDER_ROWS[order]
     sim = table.brdf if row is None else table.brdf_order[:, row, :]
     stderr = table.brdf_stderr if row is None else table.arrays["brdf_order_stderr"][:, row, :]
     modelled = np.zeros_like(sim)

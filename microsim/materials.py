@@ -63,8 +63,9 @@ class Material(Section):
         return tuple(float(getattr(self, name)) for name in self.parameter_names())
 
     def albedo_bound(self) -> float:
-        """An upper estimate of the weight factor of one interaction (for default slab depths)."""
-        raise NotImplementedError
+        """An upper estimate of the weight factor of one interaction (for default slab depths):
+        1, all of it, unless the kind knows better."""
+        return 1.0
 
 
 def codes() -> set[int]:
@@ -146,9 +147,6 @@ class Mirror(Material):
 
     kind: Literal["mirror"]
     code: ClassVar[int] = 4
-
-    def albedo_bound(self) -> float:
-        return 1.0
 
 
 MIRROR = Mirror.code

@@ -39,9 +39,13 @@ from .sensor import Sensor
 
 
 def config_to_toml(config) -> str:
-    """The validated config as TOML (two levels: tables of scalars and lists)."""
+    """The validated config as TOML."""
+    return dict_to_toml(config.model_dump(exclude_none=True))
+
+
+def dict_to_toml(data: dict) -> str:
+    """A config dictionary as TOML (two levels: tables of scalars and lists)."""
     lines = []
-    data = config.model_dump(exclude_none=True)
     for key, value in data.items():
         if not isinstance(value, dict):
             lines.append(f"{key} = {_toml_value(value)}")

@@ -34,6 +34,7 @@ def compare_json(capsys, *argv):
     return json.loads(out[0])
 
 
+@pytest.mark.slow  # a plane table of 8 M paths
 def test_true_albedo_agrees_within_one_percent(plane_table, capsys):
     result = compare_json(capsys, plane_table, "--model", "lambert", "--param", "albedo=0.5")
     assert result["model"] == "lambert" and len(result["per_incidence"]) == 2
@@ -43,6 +44,7 @@ def test_true_albedo_agrees_within_one_percent(plane_table, capsys):
     assert result["overall"]["max_abs_z"] < 4.5
 
 
+@pytest.mark.slow  # a plane table of 8 M paths
 def test_ten_percent_wrong_albedo_shows_ten_percent(plane_table, capsys):
     result = compare_json(capsys, plane_table, "--model", "lambert", "--param", "albedo=0.55")
     assert abs(result["overall"]["median_abs_rel_err"] - 0.10) <= 0.005
@@ -51,6 +53,7 @@ def test_ten_percent_wrong_albedo_shows_ten_percent(plane_table, capsys):
         assert row["albedo_sim"] == pytest.approx(0.5, abs=1e-12)
 
 
+@pytest.mark.slow  # a plane table of 8 M paths
 def test_plots_are_written_per_incidence(plane_table, tmp_path, capsys):
     assert main(["compare", str(plane_table), "--model", "lambert", "--param", "albedo=0.5",
                  "--plot", str(tmp_path / "figs")]) == 0

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 ALBEDO = 0.5
+pytestmark = pytest.mark.slow  # 8 M paths
 
 
 @pytest.fixture(scope="module")

@@ -14,6 +14,7 @@ from microsim.sensor import Sensor
 
 CELLS = 300
 RINGS = (2, 4, 6, 8, 9)
+pytestmark = pytest.mark.slow  # 2 M paths
 
 
 @pytest.fixture(scope="module")

@@ -20,6 +20,7 @@ between the incoming ray and images of the outgoing one, visible at theta_i >= 6
 import math
 
 import numpy as np
+import pytest
 
 from microsim import models
 from microsim.models.radiative_transfer import single_scattering
@@ -27,6 +28,7 @@ from microsim.models.radiative_transfer import single_scattering
 ALBEDO = 0.9
 REALIZATIONS = 16
 THETA_I = [0.0, 30.0, 60.0]
+pytestmark = pytest.mark.slow  # 2 x 3.6 M paths
 
 
 def single_scattering_table(simulate, phi):
