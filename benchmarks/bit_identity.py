@@ -7,7 +7,7 @@ checkout and once with ``--against REV`` (checked out into a temporary git workt
 the command line, and compares the two tables of each config dataset by dataset and byte for
 byte, with every attribute but the provenance that must differ (creation time, wall time).
 
-    python benchmarks/bit_identity.py --against c8660dd        # about 6 min on 2 cores
+    python benchmarks/bit_identity.py --against c8660dd        # about 5 min on 2 cores
 
 Prints one line per config and exits 1 if any table differs. A refactoring that must not move
 a bit is checked with this before it lands; ``tests/test_golden.py`` keeps a small table of

@@ -30,7 +30,7 @@ class ConfigError(ValueError):
     """A bad config: the message is one line naming the key and what is accepted."""
 
 
-Material = Annotated[Union[tuple(MATERIALS.values())], Field(discriminator="kind")]
+AnyMaterial = Annotated[Union[tuple(MATERIALS.values())], Field(discriminator="kind")]
 Scene = Annotated[Union[tuple(g.Config for g in geometry.SCENES.values())], Field(discriminator="kind")]
 
 
@@ -58,8 +58,8 @@ class Run(Section):
 class Config(Section):
     name: str | None = Field(None, max_length=200)
     scene: Scene
-    material: Material
-    base: Material | None = None
+    material: AnyMaterial
+    base: AnyMaterial | None = None
     illumination: Illumination
     sensor: SensorSection = SensorSection()
     run: Run

@@ -1,11 +1,13 @@
 """numba's on-disk cache of microsim's kernels, invalidated by any change to microsim's sources.
 
 numba stamps a cached kernel with the source of its own file only, but a kernel carries the
-machine code of the kernels it calls from other modules (inlined or linked): after an edit of
-``materials.scatter`` alone, the cached ``advance`` of the surface tracer would keep running the
-old ``scatter``. The locator below stamps every kernel defined in the microsim package (and in
-the checkout's benchmarks/ and tests/, which call them) with the hash of all microsim sources,
-so that any edit recompiles them all. Caches stay in ``__pycache__`` beside the sources.
+machine code of the kernels it calls from other modules (inlined or linked) and the values of
+their module constants: after an edit of ``materials.scatter`` alone, the cached ``advance`` of
+the surface tracer would keep running the old ``scatter``. :func:`install` wraps each of numba's
+cache locators, in numba's own order (so ``NUMBA_CACHE_DIR`` and read-only installs behave as
+usual), so that a kernel defined in the microsim package, or in the checkout's benchmarks/ and
+tests/ (which call them), is stamped with its own file's stamp and the hash of every microsim
+source: any edit of microsim recompiles them all (about 40 s).
 """
 
 from __future__ import annotations
@@ -15,41 +17,54 @@ import hashlib
 from pathlib import Path
 
 from numba.core import caching
-from numba.core.caching import InTreeCacheLocator
-
-#: the class whose list of locators numba tries in order (renamed from _CacheImpl in numba 0.60)
-_CACHE_IMPL = getattr(caching, "CacheImpl", None) or caching._CacheImpl
 
 PACKAGE = Path(__file__).resolve().parent
 #: files whose kernels get the package stamp: the package, and the checkout's callers of it
 STAMPED = (PACKAGE, PACKAGE.parent / "benchmarks", PACKAGE.parent / "tests")
+#: the class whose list of locators numba tries in order (named _CacheImpl before numba 0.60)
+_CACHE_IMPL = getattr(caching, "CacheImpl", None) or caching._CacheImpl
 
 
-@functools.lru_cache(maxsize=None)
-def package_stamp() -> bytes:
-    """SHA-256 over the path and contents of every Python file of the microsim package."""
+def sources(root: Path = PACKAGE) -> list[Path]:
+    """The package's Python files, skipping editor lock files and other dotfiles and broken links."""
+    return sorted(p for p in root.rglob("*.py") if p.is_file() and not p.name.startswith("."))
+
+
+def package_stamp(root: Path = PACKAGE) -> bytes:
+    """SHA-256 over the relative path and contents of every file of :func:`sources` (recomputed
+    when a file's modification time or size changes)."""
+    files = sources(root)
+    return _digest(root, tuple((p, p.stat().st_mtime_ns, p.stat().st_size) for p in files))
+
+
+@functools.lru_cache(maxsize=8)
+def _digest(root: Path, files: tuple) -> bytes:
     digest = hashlib.sha256()
-    for path in sorted(PACKAGE.rglob("*.py")):
-        digest.update(str(path.relative_to(PACKAGE)).encode())
+    for path, _, _ in files:
+        digest.update(str(path.relative_to(root)).encode())
         digest.update(path.read_bytes())
     return digest.digest()
 
 
-class PackageStampedLocator(InTreeCacheLocator):
-    """numba's in-tree cache locator, with the package stamp as the source stamp."""
-
-    @classmethod
-    def from_function(cls, py_func, py_file):
-        path = Path(py_file).resolve()
-        if not any(path.is_relative_to(root) for root in STAMPED):
-            return None
-        return super().from_function(py_func, py_file)
+class PackageStamped:
+    """Mixin of a numba cache locator: adds the package stamp to the stamp of a stamped file."""
 
     def get_source_stamp(self):
-        return package_stamp()
+        stamp = super().get_source_stamp()
+        py_file = getattr(self, "_py_file", None)
+        if py_file is not None and is_stamped(Path(py_file)):
+            return stamp, package_stamp()
+        return stamp
+
+
+def is_stamped(path: Path) -> bool:
+    path = path.resolve()
+    return any(path.is_relative_to(root) for root in STAMPED)
 
 
 def install() -> None:
-    """Put the locator first among numba's (idempotent)."""
-    if PackageStampedLocator not in _CACHE_IMPL._locator_classes:
-        _CACHE_IMPL._locator_classes.insert(0, PackageStampedLocator)
+    """Wrap every numba cache locator with :class:`PackageStamped` (idempotent)."""
+    locators = _CACHE_IMPL._locator_classes
+    for j, locator in enumerate(locators):
+        if not issubclass(locator, PackageStamped):
+            locators[j] = type(locator.__name__, (PackageStamped, locator), {})

@@ -5,8 +5,9 @@ its ``kind`` name and parameters with their accepted ranges (the ``[material]`` 
 tables of CONVENTIONS 4, validated by :mod:`microsim.config`), its kind ``code``, its parameter
 row (the parameters in the order they are declared, read by position in :func:`scatter`) and
 its ``albedo_bound`` (used by generators for default slab depths). Defining a subclass
-registers it in ``MATERIALS``; the config schema, the scene's material table and the generators
-all derive from that registry. Each definition is followed by the module constant of its code,
+registers it in ``MATERIALS`` (define kinds here: the config schema is built from the registry
+when :mod:`microsim.config` is imported); the config schema, the scene's material table and the
+generators all derive from that registry. Each definition is followed by the module constant of its code,
 the name :func:`scatter` compares with (numba reads module globals, not class attributes). A
 new kind costs its definition and one branch of :func:`scatter`; a code that no definition
 holds is refused when a material table is built, and :func:`scatter` raises rather than fall
@@ -50,6 +51,8 @@ class Material(Section):
     def __pydantic_init_subclass__(cls, **kwargs):
         super().__pydantic_init_subclass__(**kwargs)
         name = typing.get_args(cls.model_fields["kind"].annotation)[0]
+        if not isinstance(getattr(cls, "code", None), int):
+            raise TypeError(f"material kind {name!r} needs an integer code (code: ClassVar[int] = ...)")
         if name in MATERIALS or cls.code in codes():
             raise TypeError(f"material kind {name!r} (code {cls.code}) is defined twice")
         MATERIALS[name] = cls
@@ -152,29 +155,29 @@ class Mirror(Material):
 MIRROR = Mirror.code
 
 
-@numba.njit(cache=True, error_model="numpy")
-def scatter(kind, prm, states, i, d, n):
+@numba.njit(cache=True, error_model="numpy", _nrt=False)
+def scatter(code, prm, states, i, d, n):
     """One interaction: returns (new direction, weight factor, truncated weight fraction).
 
     ``d`` is the propagation direction of the arriving ray (pointing into the surface), ``n``
     the outward unit shading normal, ``prm`` the material's parameter row. A weight factor of 0
     means the path ends.
     """
-    if kind == LAMBERT:
+    if code == LAMBERT:
         return sample_cosine(states, i, n), prm[0], 0.0
-    if kind == CONDUCTOR:
+    if code == CONDUCTOR:
         cos_i = -(d[0] * n[0] + d[1] * n[1] + d[2] * n[2])
         return reflect(d, n), fresnel_conductor(cos_i, prm[0], prm[1]), 0.0
-    if kind == INTERFACED_LAMBERT:
+    if code == INTERFACED_LAMBERT:
         return _interfaced_lambert(prm[0], prm[1], states, i, d, n)
-    if kind == MIRROR:
+    if code == MIRROR:
         return reflect(d, n), 1.0, 0.0
-    if kind == ABSORBER:
+    if code == ABSORBER:
         return d, 0.0, 0.0
     raise ValueError("scatter: unknown material kind code")
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", _nrt=False)
 def _interfaced_lambert(albedo, eta, states, i, d, n):
     """Smooth dielectric over a Lambertian body, sampled bounce by bounce (see InterfacedLambert)."""
     cos_i = -(d[0] * n[0] + d[1] * n[1] + d[2] * n[2])

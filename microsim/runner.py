@@ -26,7 +26,7 @@ import numpy as np
 import geometry
 
 from .frames import direction
-from .integrators import INTEGRATORS
+from . import integrators
 from .integrators.records import COUNT_NAMES, ENERGY_NAMES, ORDERS
 from .rng import geometry_rng, stream_key
 from .sensor import Sensor
@@ -75,9 +75,9 @@ class Plan:
         return geometry.SCENES[self.config.scene.kind]
 
     @property
-    def tracer(self):
+    def tracer_class(self):
         """The integrator class that traces the scenes of this run (named by the generator)."""
-        return INTEGRATORS[self.generator.INTEGRATOR]
+        return integrators.get(self.generator.INTEGRATOR)
 
 
 @dataclass
@@ -176,9 +176,9 @@ def trace_units(plan: Plan, units, emit) -> None:
     current, tracer = None, None
     for r, i in units:
         if r != current:
-            tracer = None  # the previous realization's scene and acceleration structure go first
+            scene = tracer = None  # the previous realization's scene and acceleration structure go first
             scene = generator.generate(plan.scene, plan.config, geometry_rng(seed, r))
-            tracer = plan.tracer(scene, sensor)
+            tracer = plan.tracer_class(scene, sensor)
             current = r
         tally = tracer.trace(plan.incidence_direction(i), plan.paths_per_realization, stream_key(seed, r, i),
                              max_order)
@@ -219,7 +219,7 @@ def run(config, workers: int = 1, progress=None) -> Result:
     if len(blocks) <= 1:
         trace_units(plan, plan.units, collect)
     else:
-        plan.tracer.compile(sensor)
+        plan.tracer_class.compile(sensor)
         context = multiprocessing.get_context("fork")
         q = context.Queue()
         with ProcessPoolExecutor(len(blocks), mp_context=context, initializer=_init_worker, initargs=(q,)) as pool:

@@ -27,11 +27,11 @@ BASE_MARGIN = 0.01
 class MaterialTable:
     """Kind codes and parameter rows of the materials a scene uses."""
 
-    kind: np.ndarray  # (M,) int32
+    code: np.ndarray  # (M,) int32 kind codes
     params: np.ndarray  # (M, materials.row_length()) float64
 
     def __post_init__(self):
-        unknown = set(np.unique(self.kind).tolist()) - codes()
+        unknown = set(np.unique(self.code).tolist()) - codes()
         if unknown:
             raise ValueError(f"material kind codes {sorted(unknown)} unknown; known: {sorted(codes())}")
 
@@ -48,11 +48,11 @@ class SceneArrays(NamedTuple):
     """What the tracer's kernels read of a scene (see :class:`Scene` and :class:`Shapes`)."""
 
     face_shape: np.ndarray
-    shape_kind: np.ndarray
+    shape_code: np.ndarray
     shape_params: np.ndarray
     shape_material: np.ndarray
     shape_size: np.ndarray
-    material_kind: np.ndarray
+    material_code: np.ndarray
     material_params: np.ndarray
     tile: float
     z_top: float
@@ -89,7 +89,7 @@ class Scene:
 
     def arrays(self) -> SceneArrays:
         s = self.shapes
-        return SceneArrays(self.face_shape, s.kind, s.params, s.material, s.size, self.materials.kind,
+        return SceneArrays(self.face_shape, s.code, s.params, s.material, s.size, self.materials.code,
                            self.materials.params, self.tile, self.z_top, self.z_bottom)
 
 

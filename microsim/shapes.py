@@ -26,7 +26,8 @@ import numpy as np
 SPHERE = 0
 PLANE = 1
 ELLIPSOID = 2
-KINDS = {"sphere": SPHERE, "plane": PLANE, "ellipsoid": ELLIPSOID}
+#: shape name -> kind code
+CODES = {"sphere": SPHERE, "plane": PLANE, "ellipsoid": ELLIPSOID}
 N_PARAMS = 7
 
 
@@ -34,15 +35,15 @@ N_PARAMS = 7
 class Shapes:
     """Analytic data of every shape of a scene (one row per shape)."""
 
-    kind: np.ndarray  # (S,) int32
+    code: np.ndarray  # (S,) int32 kind code
     params: np.ndarray  # (S, N_PARAMS) float64
     material: np.ndarray  # (S,) int32 index into the scene's material table (set by SceneBuilder.add)
     size: np.ndarray  # (S,) float64 characteristic length, scales the ray offset
 
     def __post_init__(self):
-        unknown = set(np.unique(self.kind).tolist()) - set(KINDS.values())
+        unknown = set(np.unique(self.code).tolist()) - set(CODES.values())
         if unknown:
-            raise ValueError(f"shape kind codes {sorted(unknown)} unknown; known: {KINDS}")
+            raise ValueError(f"shape kind codes {sorted(unknown)} unknown; known: {CODES}")
 
     @classmethod
     def empty(cls) -> "Shapes":
@@ -51,12 +52,12 @@ class Shapes:
         )
 
     def __len__(self) -> int:
-        return len(self.kind)
+        return len(self.code)
 
     @staticmethod
     def concatenate(parts: list["Shapes"]) -> "Shapes":
         return Shapes(
-            np.concatenate([p.kind for p in parts]).astype(np.int32),
+            np.concatenate([p.code for p in parts]).astype(np.int32),
             np.concatenate([p.params for p in parts]),
             np.concatenate([p.material for p in parts]).astype(np.int32),
             np.concatenate([p.size for p in parts]),
@@ -89,21 +90,21 @@ class Shapes:
         return Shapes(np.full(n, ELLIPSOID, np.int32), params, np.zeros(n, np.int32), np.min(semi_axes, axis=1))
 
 
-@numba.njit(cache=True, error_model="numpy")
-def surface_point(kind, prm, h):
+@numba.njit(cache=True, error_model="numpy", _nrt=False)
+def surface_point(code, prm, h):
     """Project the hit h = (x, y, z) onto the analytic shape; return the point and unit normal."""
     x, y, z = h
-    if kind == SPHERE:
+    if code == SPHERE:
         vx, vy, vz = x - prm[0], y - prm[1], z - prm[2]
         inv = 1.0 / math.sqrt(vx * vx + vy * vy + vz * vz)
         nx, ny, nz = vx * inv, vy * inv, vz * inv
         r = prm[4]
         return (prm[0] + r * nx, prm[1] + r * ny, prm[2] + r * nz), (nx, ny, nz)
-    if kind == PLANE:
+    if code == PLANE:
         nx, ny, nz = prm[3], prm[4], prm[5]
         d = (x - prm[0]) * nx + (y - prm[1]) * ny + (z - prm[2]) * nz
         return (x - d * nx, y - d * ny, z - d * nz), (nx, ny, nz)
-    if kind == ELLIPSOID:  # radial projection in the frame where the ellipsoid is the unit sphere
+    if code == ELLIPSOID:  # radial projection in the frame where the ellipsoid is the unit sphere
         ax, ay, az = prm[3], prm[4], prm[5]
         ux, uy, uz = (x - prm[0]) / ax, (y - prm[1]) / ay, (z - prm[2]) / az
         s = prm[6] / math.sqrt(ux * ux + uy * uy + uz * uz)

@@ -11,8 +11,7 @@ from microsim.compare import cell_averages
 from microsim.sensor import Sensor
 
 
-@pytest.fixture(scope="module")
-def plane_table(tmp_path_factory):
+def write_plane_table(directory, paths: int):
     from microsim import config, runner, tables
 
     cfg = config.validate({
@@ -20,11 +19,23 @@ def plane_table(tmp_path_factory):
         "material": {"kind": "lambert", "albedo": 0.5},
         "illumination": {"theta_i_deg": [0.0, 50.0]},
         "sensor": {"cells": 200},
-        "run": {"paths": 4_000_000, "realizations": 64, "seed": 9},
+        "run": {"paths": paths, "realizations": 64, "seed": 9},
     })
-    path = tmp_path_factory.mktemp("compare") / "plane.h5"
+    path = directory / "plane.h5"
     tables.write(path, runner.run(cfg), cfg)
     return path
+
+
+@pytest.fixture(scope="module")
+def plane_table(tmp_path_factory):
+    """Lambertian plane, 4 M paths per incidence: the statistics of compare."""
+    return write_plane_table(tmp_path_factory.mktemp("compare"), 4_000_000)
+
+
+@pytest.fixture(scope="module")
+def small_table(tmp_path_factory):
+    """The same plane at 6400 paths: a table to give bad input about."""
+    return write_plane_table(tmp_path_factory.mktemp("small"), 6400)
 
 
 def compare_json(capsys, *argv):
@@ -34,7 +45,7 @@ def compare_json(capsys, *argv):
     return json.loads(out[0])
 
 
-@pytest.mark.slow  # a plane table of 8 M paths
+@pytest.mark.slow  # a plane table of 2 x 4 M paths
 def test_true_albedo_agrees_within_one_percent(plane_table, capsys):
     result = compare_json(capsys, plane_table, "--model", "lambert", "--param", "albedo=0.5")
     assert result["model"] == "lambert" and len(result["per_incidence"]) == 2
@@ -44,7 +55,7 @@ def test_true_albedo_agrees_within_one_percent(plane_table, capsys):
     assert result["overall"]["max_abs_z"] < 4.5
 
 
-@pytest.mark.slow  # a plane table of 8 M paths
+@pytest.mark.slow  # a plane table of 2 x 4 M paths
 def test_ten_percent_wrong_albedo_shows_ten_percent(plane_table, capsys):
     result = compare_json(capsys, plane_table, "--model", "lambert", "--param", "albedo=0.55")
     assert abs(result["overall"]["median_abs_rel_err"] - 0.10) <= 0.005
@@ -53,7 +64,7 @@ def test_ten_percent_wrong_albedo_shows_ten_percent(plane_table, capsys):
         assert row["albedo_sim"] == pytest.approx(0.5, abs=1e-12)
 
 
-@pytest.mark.slow  # a plane table of 8 M paths
+@pytest.mark.slow  # a plane table of 2 x 4 M paths
 def test_plots_are_written_per_incidence(plane_table, tmp_path, capsys):
     assert main(["compare", str(plane_table), "--model", "lambert", "--param", "albedo=0.5",
                  "--plot", str(tmp_path / "figs")]) == 0
@@ -96,8 +107,8 @@ def test_models_lists_every_model(capsys):
     (["--model", "oren_nayar", "--param", "albedo=0.5", "--param", "roughness=2"], "roughness"),
     (["--model", "lambert", "--param", "albedo=0.5", "--order", "7"], "--order"),
 ])
-def test_bad_compare_input_gives_one_line_and_exit_2(plane_table, argv, key, capsys):
-    assert main(["compare", str(plane_table), *argv]) == 2
+def test_bad_compare_input_gives_one_line_and_exit_2(small_table, argv, key, capsys):
+    assert main(["compare", str(small_table), *argv]) == 2
     captured = capsys.readouterr()
     lines = captured.err.strip().splitlines()
     assert len(lines) == 1 and key in lines[0] and "Traceback" not in captured.err and captured.out == ""

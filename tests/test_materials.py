@@ -78,7 +78,7 @@ def test_an_unknown_material_code_is_refused_when_the_table_is_built():
 
 def test_a_material_row_holds_the_parameters_in_declaration_order():
     table = MaterialTable.of([Conductor(kind="conductor", eta=0.2, k=3.0), Absorber(kind="absorber")])
-    assert table.kind.tolist() == [Conductor.code, Absorber.code]
+    assert table.code.tolist() == [Conductor.code, Absorber.code]
     assert table.params.tolist() == [[0.2, 3.0], [0.0, 0.0]]
 
 

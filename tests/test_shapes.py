@@ -7,7 +7,7 @@ from microsim.shapes import ELLIPSOID, PLANE, SPHERE, Shapes, surface_point
 
 
 def project(shapes, k, points):
-    out = np.array([surface_point(shapes.kind[k], shapes.params[k], tuple(p)) for p in points])
+    out = np.array([surface_point(shapes.code[k], shapes.params[k], tuple(p)) for p in points])
     return out[:, 0], out[:, 1]
 
 
@@ -19,7 +19,7 @@ def points():
 
 def test_sphere_projection_lies_on_the_projection_radius_with_the_radial_normal(points):
     shapes = Shapes.spheres(np.array([[1.0, -2.0, 0.5]]), 1.0, 1.01)
-    assert shapes.kind[0] == SPHERE
+    assert shapes.code[0] == SPHERE
     p, n = project(shapes, 0, points)
     radial = p - [1.0, -2.0, 0.5]
     assert np.allclose(np.linalg.norm(radial, axis=1), 1.01, rtol=1e-14)
@@ -29,7 +29,7 @@ def test_sphere_projection_lies_on_the_projection_radius_with_the_radial_normal(
 def test_plane_projection_drops_the_point_along_the_normal(points):
     normal = np.array([[0.3, -0.2, 0.9]])
     shapes = Shapes.planes(np.array([[0.0, 0.0, -1.0]]), normal, size=10.0)
-    assert shapes.kind[0] == PLANE
+    assert shapes.code[0] == PLANE
     p, n = project(shapes, 0, points)
     unit = normal[0] / np.linalg.norm(normal)
     assert np.allclose((p - [0.0, 0.0, -1.0]) @ unit, 0.0, atol=1e-13)
@@ -40,7 +40,7 @@ def test_plane_projection_drops_the_point_along_the_normal(points):
 def test_ellipsoid_projection_lies_on_the_scaled_surface_with_the_gradient_normal(points):
     centre, axes = np.array([1.0, -2.0, 0.5]), np.array([2.0, 0.5, 1.0])
     shapes = Shapes.ellipsoids(centre[None], axes[None], 1.02)
-    assert shapes.kind[0] == ELLIPSOID
+    assert shapes.code[0] == ELLIPSOID
     p, n = project(shapes, 0, points)
     u = (p - centre) / axes
     assert np.allclose(np.linalg.norm(u, axis=1), 1.02, rtol=1e-13)

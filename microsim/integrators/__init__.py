@@ -9,7 +9,14 @@ every integrator shares (exit and binning, roulette, truncation) are in :mod:`.r
 :mod:`.events`.
 """
 
-from .surface import SurfaceTracer
+import importlib
 
-#: integrator name (a generator's INTEGRATOR) -> tracer class
-INTEGRATORS = {"surface": SurfaceTracer}
+#: integrator name (a generator's INTEGRATOR) -> "module:class" of its tracer, imported on use
+#: (reading a table or its records must not import a tracer)
+INTEGRATORS = {"surface": "microsim.integrators.surface:SurfaceTracer"}
+
+
+def get(name: str):
+    """The tracer class of integrator ``name``."""
+    module, cls = INTEGRATORS[name].split(":")
+    return getattr(importlib.import_module(module), cls)

@@ -59,7 +59,7 @@ def survives_interaction(paths, i, tally):
     return True
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy", _nrt=False)
 def move_path(paths, to, source):
     """Copy every field of path ``source`` to row ``to`` (compaction of the live paths).
 

@@ -5,7 +5,8 @@ As pbrt-v4's wavefront work items and MCDC's records do, each bundle is a namedt
 because the classes live in this importable module). Kernels take a few bundles and a row
 index instead of dozens of arrays. A new per-path field is one entry of ``PATH_FIELDS``: it is
 allocated with the others and carried along when live paths are compacted
-(:func:`microsim.integrators.events.move_path`).
+(:func:`microsim.integrators.events.move_path`); no kernel signature changes. Its starting value
+is set where a path starts (``spawn_paths``), its updates where it changes.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ Rays = namedtuple("Rays", ["origin", "direction", "tfar", "end"])
 Hits = namedtuple("Hits", ["prim", "normal"])
 
 #: what a batch of paths produced, sums of weights not yet divided by ``paths``: exits per order
-#: and sensor cell (ORDERS, n_cells), lost energy (N_ENERGY,) and event counts (N_COUNTS,)
+#: and sensor cell (ORDERS, n_cells), lost energy (ENERGY_NAMES) and event counts (COUNT_NAMES)
 Tally = namedtuple("Tally", ["paths", "exit_weight", "energy", "counts"])
 
 #: indices of ``Tally.energy``

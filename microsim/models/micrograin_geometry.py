@@ -4,8 +4,8 @@ Paper: ``papers/micrograin_bsdf_anisotropic.txt``. Grains are half-ellipsoids of
 semi-axis 1 and lateral semi-axes 1/beta_x, 1/beta_y whose centres are a Poisson process of
 density rho on the base plane z = 0 (CONVENTIONS 5.3), so that the covered fraction is
 ``tau0 = 1 - exp(-rho pi / (beta_x beta_y))``. That density, lambda and the unit-space maps
-below are the relations of the Boolean model in :mod:`microsim.boolean_model`, shared with the
-scene generator.
+below are the relations of the Boolean model in :mod:`microsim.boolean_model`, which the
+micrograin scene generator (a later issue) is to share.
 
 Parametrisation. The paper takes spheres of radius r_s stretched laterally by 1/beta_x, 1/beta_y
 (Eq. 8) and then sets r_s = 1 (after Eq. 9): r_s is our vertical semi-axis, and beta is the
