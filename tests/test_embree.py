@@ -1,0 +1,47 @@
+"""The Embree binding (microsim/embree.py): known hits, the layout check, one-line refusals."""
+
+import numpy as np
+import pytest
+
+from microsim import embree
+
+
+def test_the_binding_finds_known_hits_on_a_triangle_and_a_sphere():
+    scene = embree.Scene(vertices=[[0, 0, 0], [2, 0, 0], [0, 2, 0]], faces=[[0, 1, 2]],
+                         spheres=[[5.0, 5.0, 0.0, 1.5]])
+    prim, t, normal = scene.intersect([[0.5, 0.5, 3.0], [5.0, 5.0, 4.0], [5.0, 5.0, 0.0], [9.0, 9.0, 9.0]],
+                                      [[0, 0, -1], [0, 0, -1], [1, 0, 0], [0, 0, 1]], [10.0, 10.0, 10.0, 10.0])
+    assert prim.tolist() == [0, 1, 1, -1]
+    assert np.allclose(t, [3.0, 2.5, 1.5, 10.0], rtol=1e-6)  # outside, outside, from the centre (exit), miss
+    assert np.allclose(normal[1] / np.linalg.norm(normal[1]), [0, 0, 1], atol=1e-6)
+    assert np.allclose(normal[2] / np.linalg.norm(normal[2]), [1, 0, 0], atol=1e-6)  # the exit faces out
+
+
+def test_a_missing_library_is_one_line(monkeypatch):
+    monkeypatch.setattr("importlib.util.find_spec", lambda name: None)
+    with pytest.raises(embree.EmbreeUnavailable, match="^embreex is not installed"):
+        embree.library_path()
+
+
+def test_ray_hit_records_are_aligned_and_views_alias_them():
+    records = embree.ray_hits(5)
+    assert records.ctypes.data % embree.ALIGNMENT == 0 and records.dtype.itemsize == embree.RAYHIT_BYTES
+    origin, direction, tfar = embree.ray_views(records)
+    origin[3] = (1.0, 2.0, 3.0)
+    direction[3] = (0.0, 0.0, -1.0)
+    tfar[3] = 7.0
+    assert (records[3]["org_x"], records[3]["org_z"], records[3]["dir_z"], records[3]["tfar"]) == (1.0, 3.0, -1.0, 7.0)
+    assert np.all(records["mask"] == embree.INVALID_ID) and np.all(records["tnear"] == 0.0)
+
+
+def test_the_layout_check_refuses_hits_read_from_the_wrong_fields(monkeypatch):
+    """What the check would see if RAYHIT put tfar or primID at the wrong offset."""
+    wrong = {
+        "distances": (np.array([0, 1, -1]), np.array([0.0, 0.0, 10.0], np.float32), np.tile([0.0, 0.0, 1.0], (3, 1))),
+        "primitives": (np.array([0, 0, -1]), np.array([2.0, 2.0, 10.0], np.float32), np.tile([0.0, 0.0, 1.0], (3, 1))),
+        "normals": (np.array([0, 1, -1]), np.array([2.0, 2.0, 10.0], np.float32), np.tile([2.0, 0.0, 0.0], (3, 1))),
+    }
+    for name, answer in wrong.items():
+        monkeypatch.setattr(embree.Scene, "intersect", lambda self, o, d, t, answer=answer: answer)
+        with pytest.raises(embree.EmbreeUnavailable, match="^RTCRayHit layout check failed"):
+            embree._check_layout(embree._open())
