@@ -8,12 +8,15 @@ Spheres of radius r = 1 may overlap. Volume fraction phi = 1 - exp(-n 4/3 pi), s
 density is n = -ln(1 - phi) / (4/3 pi) and the free path in the void is exponential with mean
 l = 1 / (n pi) = 4 / (-3 ln(1 - phi)) (both from :mod:`microsim.boolean_model`).
 
-Each sphere is an icosphere rotated at random, scaled so that its area is exactly 4 pi: by
-Cauchy's formula its mean projected area is then pi, so the void free path keeps its exact
-mean l whatever the tessellation. The level is the coarsest whose largest distance to the
-true sphere is within ``mesh_error`` (unless ``subdivisions`` is given); that distance is
-recorded. Hit points are projected onto the sphere of the mesh's vertex radius and shaded with
-the exact sphere normal.
+By default every sphere is exact: Embree's native sphere primitive (one x, y, z, r each),
+which the direct Embree backend traces (``sphere_model = "exact"`` in the table). Given
+``subdivisions`` or ``mesh_error``, each sphere is instead an icosphere rotated at random,
+scaled so that its area is exactly 4 pi: by Cauchy's formula its mean projected area is then
+pi, so the void free path keeps its exact mean l whatever the tessellation. The level is the
+coarsest whose largest distance to the true sphere is within ``mesh_error`` (unless
+``subdivisions`` is given); that distance is recorded. Hit points are projected onto the sphere
+of the mesh's vertex radius and shaded with the exact sphere normal. Both models draw the same
+centres for the same seed, so the two can be compared realization by realization.
 
 Defaults (every value used is recorded in the table's scene/ attrs):
 
@@ -56,7 +59,6 @@ TRANSMISSION_TARGET = 1e-3
 MAX_OPTICAL_DEPTH = 40.0
 TILE_FREE_PATHS = 3.0
 TILE_RANGE = (16.0, 64.0)
-DEFAULT_MESH_ERROR = 0.01
 MAX_SUBDIVISIONS = 6
 #: the slab's top and bottom lie this far (radii) beyond the highest and lowest mesh point
 SLAB_MARGIN = 1e-3
@@ -75,6 +77,14 @@ def check(config) -> None:
     scene = config.scene
     if scene.subdivisions is not None and scene.mesh_error is not None:
         raise ValueError("scene.mesh_error: give either subdivisions or mesh_error, not both")
+    if config.run.backend == "embreex" and is_exact(scene):
+        raise ValueError("run.backend = 'embreex' traces triangles only: give scene.subdivisions or "
+                         "scene.mesh_error for tessellated spheres, or use backend 'direct' for exact ones")
+
+
+def is_exact(scene) -> bool:
+    """Whether the spheres are Embree's exact native spheres (no tessellation asked for)."""
+    return scene.subdivisions is None and scene.mesh_error is None
 
 
 def diffusion_decay(c: float) -> float:
@@ -127,11 +137,14 @@ def resolve(config) -> dict:
     tau = default_optical_depth(c, config.run.max_order)
     depth = scene.depth if scene.depth is not None else tau * l
     tile = scene.tile if scene.tile is not None else min(max(TILE_FREE_PATHS * l, TILE_RANGE[0]), TILE_RANGE[1])
-    if scene.subdivisions is not None:
-        level = scene.subdivisions
+    if is_exact(scene):
+        model = {"sphere_model": "exact", "triangles_per_sphere": 0, "vertex_radius": 1.0, "max_mesh_error": 0.0}
     else:
-        level = level_for(scene.mesh_error if scene.mesh_error is not None else DEFAULT_MESH_ERROR)
-    _, faces, vertex_radius, error = unit_icosphere(level)
+        level = scene.subdivisions if scene.subdivisions is not None else level_for(scene.mesh_error)
+        _, faces, vertex_radius, error = unit_icosphere(level)
+        model = {"sphere_model": "icosphere", "subdivisions": level, "triangles_per_sphere": len(faces),
+                 "vertex_radius": vertex_radius, "max_mesh_error": error}
+    vertex_radius = model["vertex_radius"]
     return {
         "kind": KIND,
         "volume_fraction": phi,
@@ -143,10 +156,7 @@ def resolve(config) -> dict:
         "optical_depth": depth / l,
         "tile": tile,
         "tile_default": scene.tile is None,
-        "subdivisions": level,
-        "triangles_per_sphere": len(faces),
-        "vertex_radius": vertex_radius,
-        "max_mesh_error": error,
+        **model,
         "expected_spheres": n * tile * tile * depth,
         "base": config.base.kind if config.base is not None else "none",
         "base_z": -depth - vertex_radius,
@@ -176,17 +186,25 @@ def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
     tile, depth = resolved["tile"], resolved["depth"]
     count = rng.poisson(resolved["number_density"] * tile * tile * depth)
     centres = rng.uniform((0.0, 0.0, -depth), (tile, tile, 0.0), size=(count, 3))
-    rotations = Rotation.random(count, random_state=rng).as_matrix() if count else np.zeros((0, 3, 3))
-    vertices0, faces0, vertex_radius, _ = unit_icosphere(resolved["subdivisions"])
-    all_centres, source = periodic_images(centres, tile, vertex_radius)
-    n_all = len(all_centres)
-    vertices = np.einsum("sij,vj->svi", rotations[source], vertices0) + all_centres[:, None, :]
-    faces = faces0[None, :, :] + (np.arange(n_all) * len(vertices0))[:, None, None]
-    face_shape = np.repeat(np.arange(n_all, dtype=np.int32), len(faces0))
+    all_centres, source = periodic_images(centres, tile, resolved["vertex_radius"])
     builder = SceneBuilder(tile)
-    builder.add(vertices.reshape(-1, 3), faces.reshape(-1, 3), face_shape,
-                Shapes.spheres(all_centres, 1.0, vertex_radius), config.material)
+    if resolved["sphere_model"] == "exact":
+        builder.add_spheres(all_centres, 1.0, config.material)
+    else:
+        rotations = Rotation.random(count, random_state=rng).as_matrix() if count else np.zeros((0, 3, 3))
+        add_icospheres(builder, all_centres, rotations[source], resolved["subdivisions"], config.material)
     if config.base is not None:
         builder.add_base_plane(resolved["base_z"], config.base)
-    info = dict(resolved, spheres=int(count), sphere_images=int(n_all - count))
+    info = dict(resolved, spheres=int(count), sphere_images=int(len(all_centres) - count))
     return builder.build(resolved["z_top"], resolved["z_bottom"], info)
+
+
+def add_icospheres(builder: SceneBuilder, centres, rotations, level: int, material) -> None:
+    """Rotated icospheres of area 4 pi about ``centres``, shaded as spheres of the vertex radius."""
+    vertices0, faces0, vertex_radius, _ = unit_icosphere(level)
+    n = len(centres)
+    vertices = np.einsum("sij,vj->svi", rotations, vertices0) + centres[:, None, :]
+    faces = faces0[None, :, :] + (np.arange(n) * len(vertices0))[:, None, None]
+    face_shape = np.repeat(np.arange(n, dtype=np.int32), len(faces0))
+    builder.add(vertices.reshape(-1, 3), faces.reshape(-1, 3), face_shape,
+                Shapes.spheres(centres, 1.0, vertex_radius), material)

@@ -12,11 +12,14 @@ import sys
 from pathlib import Path
 
 import click
+import numba
 
 from . import config as config_module
 from .compare import ORDER_ROWS
 
 EXIT_BAD_INPUT = 2
+#: threads a process may run: numba's pool size (the machine's cores unless NUMBA_NUM_THREADS says)
+MAX_THREADS = numba.config.NUMBA_NUM_THREADS
 
 
 class BadInput(click.ClickException):
@@ -34,10 +37,14 @@ def cli():
 @click.option("--out", "out", type=click.Path(dir_okay=False, path_type=Path),
               help="table to write [default: <name or config stem>.h5]")
 @click.option("--workers", type=click.IntRange(1, 256), default=1, show_default=True, help="worker processes")
+@click.option("--threads", type=click.IntRange(1, MAX_THREADS), default=1, show_default=True,
+              help="threads per process, sharing one scene (direct backend)")
+@click.option("--backend", type=click.Choice(["auto", "direct", "embreex"]),
+              help="how Embree is called (overrides run.backend)")
 @click.option("--paths", type=click.IntRange(1, 10**12), help="paths per incidence (overrides run.paths)")
 @click.option("--seed", type=click.IntRange(0, 2**63 - 1), help="random seed (overrides run.seed)")
 @click.option("--force", is_flag=True, help="overwrite an existing table")
-def run(config_path, out, workers, paths, seed, force):
+def run(config_path, out, workers, threads, backend, paths, seed, force):
     """Trace CONFIG.toml and write its HDF5 table."""
     from . import runner, tables
 
@@ -46,22 +53,28 @@ def run(config_path, out, workers, paths, seed, force):
         overrides["run.paths"] = paths
     if seed is not None:
         overrides["run.seed"] = seed
+    if backend is not None:
+        overrides["run.backend"] = backend
     try:
         config = config_module.load(config_path, overrides)
     except config_module.ConfigError as err:
         raise BadInput(str(err)) from None
     out = out if out is not None else Path(f"{config.name or config_path.stem}.h5")
     _check_writable(out, force)
-    plan = runner.Plan.from_config(config)
+    try:
+        plan = runner.Plan.from_config(config, threads)
+    except runner.PlanError as err:
+        raise BadInput(str(err)) from None
     total = plan.paths * plan.n_incidences
     with _progress(total) as advance:
-        result = runner.run(config, workers=workers, progress=advance)
+        result = runner.run(config, workers=workers, threads=threads, progress=advance)
     tables.write(out, result, config)
     albedo = ", ".join(
         f"{math.degrees(t):g}deg {a.mean[-1]:.4f}+-{a.stderr[-1]:.4f}" for t, a in zip(plan.theta_i, result.albedo)
     )
     rate = total / result.wall_time
-    click.echo(f"albedo {albedo} | {result.wall_time:.1f} s, {rate:.3g} paths/s, {workers} worker(s)")
+    click.echo(f"albedo {albedo} | {result.wall_time:.1f} s, {rate:.3g} paths/s, {workers} worker(s) x {threads} "
+               f"thread(s), backend {plan.backend}")
     click.echo(f"table written to {out}")
 
 

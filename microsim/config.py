@@ -53,6 +53,9 @@ class Run(Section):
     realizations: int = Field(32, ge=2, le=100_000, description="independent geometry samples = batches of the standard errors")
     seed: int = Field(1, ge=0, le=2**63 - 1)
     max_order: int = Field(0, ge=0, le=1_000_000)
+    backend: Literal["auto", "direct", "embreex"] = Field(
+        "auto", description="how Embree is called: direct (numba, native spheres, threads) or embreex; "
+                            "auto = direct where its binding loads")
 
 
 class Config(Section):

@@ -155,7 +155,7 @@ class Mirror(Material):
 MIRROR = Mirror.code
 
 
-@numba.njit(cache=True, error_model="numpy", _nrt=False)
+@numba.njit(cache=True, error_model="numpy", _nrt=False, inline="always")
 def scatter(code, prm, states, i, d, n):
     """One interaction: returns (new direction, weight factor, truncated weight fraction).
 

@@ -26,7 +26,7 @@ import numpy as np
 import geometry
 
 from .frames import direction
-from . import integrators
+from . import embree, integrators
 from .integrators.records import COUNT_NAMES, ENERGY_NAMES, ORDERS
 from .rng import geometry_rng, stream_key
 from .sensor import Sensor
@@ -43,14 +43,23 @@ class Plan:
     sensor_cells: int
     realizations: int
     paths_per_realization: int
+    backend: str  # resolved run.backend: "direct" or "embreex"
+    backend_note: str  # why "auto" fell back to embreex ("" otherwise)
+    threads: int = 1
 
     @classmethod
-    def from_config(cls, config) -> "Plan":
+    def from_config(cls, config, threads: int = 1) -> "Plan":
+        """The plan of a validated config; raises PlanError (one line) if it cannot be traced here."""
         run = config.run
         theta = np.radians(np.asarray(config.illumination.theta_i_deg, dtype=np.float64))
         phi = np.full_like(theta, math.radians(config.illumination.phi_i_deg))
-        return cls(config, geometry.SCENES[config.scene.kind].resolve(config), theta, phi,
-                   config.sensor.cells, run.realizations, math.ceil(run.paths / run.realizations))
+        scene = geometry.SCENES[config.scene.kind].resolve(config)
+        backend, note = resolve_backend(run.backend)
+        if backend == "embreex" and scene.get("sphere_model") == "exact":
+            raise PlanError(f"exact spheres need the direct Embree backend, which cannot load here ({note}); "
+                            "give scene.subdivisions or scene.mesh_error for tessellated spheres")
+        return cls(config, scene, theta, phi, config.sensor.cells, run.realizations,
+                   math.ceil(run.paths / run.realizations), backend, note, threads)
 
     @property
     def n_incidences(self) -> int:
@@ -78,6 +87,27 @@ class Plan:
     def tracer_class(self):
         """The integrator class that traces the scenes of this run (named by the generator)."""
         return integrators.get(self.generator.INTEGRATOR)
+
+    @property
+    def tracer_options(self) -> dict:
+        return {"backend": self.backend, "threads": self.threads}
+
+
+class PlanError(ValueError):
+    """A config that cannot be traced on this machine: the message is one line."""
+
+
+def resolve_backend(requested: str) -> tuple[str, str]:
+    """(backend, why "auto" fell back): "direct" where the Embree binding loads, else "embreex"."""
+    if requested == "embreex":
+        return "embreex", ""
+    try:
+        embree.load()
+    except embree.EmbreeUnavailable as err:
+        if requested == "direct":
+            raise PlanError(f"run.backend = 'direct': {err}") from None
+        return "embreex", str(err)
+    return "direct", ""
 
 
 @dataclass
@@ -178,7 +208,7 @@ def trace_units(plan: Plan, units, emit) -> None:
         if r != current:
             scene = tracer = None  # the previous realization's scene and acceleration structure go first
             scene = generator.generate(plan.scene, plan.config, geometry_rng(seed, r))
-            tracer = plan.tracer_class(scene, sensor)
+            tracer = plan.tracer_class(scene, sensor, **plan.tracer_options)
             current = r
         tally = tracer.trace(plan.incidence_direction(i), plan.paths_per_realization, stream_key(seed, r, i),
                              max_order)
@@ -203,9 +233,10 @@ def split(units: list, parts: int) -> list[list]:
     return [units[a:b] for a, b in zip(edges[:-1], edges[1:]) if b > a]
 
 
-def run(config, workers: int = 1, progress=None) -> Result:
-    """Trace a validated config; ``progress(paths_done)`` is called as units complete."""
-    plan = Plan.from_config(config)
+def run(config, workers: int = 1, threads: int = 1, progress=None) -> Result:
+    """Trace a validated config on ``workers`` processes of ``threads`` threads each;
+    ``progress(paths_done)`` is called as units complete. Raises PlanError (one line)."""
+    plan = Plan.from_config(config, threads)
     sensor = Sensor.build(plan.sensor_cells)
     reducer = _Reducer(plan, sensor)
     start = time.perf_counter()
@@ -219,7 +250,7 @@ def run(config, workers: int = 1, progress=None) -> Result:
     if len(blocks) <= 1:
         trace_units(plan, plan.units, collect)
     else:
-        plan.tracer_class.compile(sensor)
+        plan.tracer_class.compile(sensor, **plan.tracer_options)
         context = multiprocessing.get_context("fork")
         q = context.Queue()
         with ProcessPoolExecutor(len(blocks), mp_context=context, initializer=_init_worker, initargs=(q,)) as pool:

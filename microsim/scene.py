@@ -47,7 +47,7 @@ class MaterialTable:
 class SceneArrays(NamedTuple):
     """What the tracer's kernels read of a scene (see :class:`Scene` and :class:`Shapes`)."""
 
-    face_shape: np.ndarray
+    prim_shape: np.ndarray
     shape_code: np.ndarray
     shape_params: np.ndarray
     shape_material: np.ndarray
@@ -61,7 +61,10 @@ class SceneArrays(NamedTuple):
 
 @dataclass
 class Scene:
-    """One realization of a microgeometry, ready to trace."""
+    """One realization of a microgeometry, ready to trace: triangles and native spheres.
+
+    Primitives are numbered triangles first, then spheres; ``prim_shape`` gives each one's shape.
+    """
 
     vertices: np.ndarray  # (V, 3) float32
     faces: np.ndarray  # (F, 3) int32, counter-clockwise seen from outside (normal points out)
@@ -73,23 +76,31 @@ class Scene:
     z_bottom: float
     #: resolved parameters and measured properties, stored as the table's scene/ attrs
     info: dict = field(default_factory=dict)
+    spheres: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), np.float32))  # (K, 4) x, y, z, r
+    sphere_shape: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))  # (K,) int32
 
     def __post_init__(self):
         self.vertices = np.ascontiguousarray(self.vertices, dtype=np.float32)
         self.faces = np.ascontiguousarray(self.faces, dtype=np.int32)
         self.face_shape = np.ascontiguousarray(self.face_shape, dtype=np.int32)
-        if len(self.faces) != len(self.face_shape):
-            raise ValueError("every face needs a shape")
-        if len(self.faces) and self.face_shape.max() >= len(self.shapes):
-            raise ValueError("face_shape refers to a missing shape")
+        self.spheres = np.ascontiguousarray(self.spheres, dtype=np.float32).reshape(-1, 4)
+        self.sphere_shape = np.ascontiguousarray(self.sphere_shape, dtype=np.int32)
+        if len(self.faces) != len(self.face_shape) or len(self.spheres) != len(self.sphere_shape):
+            raise ValueError("every face and sphere needs a shape")
+        if len(self.prim_shape) and self.prim_shape.max() >= len(self.shapes):
+            raise ValueError("a primitive refers to a missing shape")
 
     @property
     def n_triangles(self) -> int:
         return len(self.faces)
 
+    @property
+    def prim_shape(self) -> np.ndarray:
+        return np.concatenate([self.face_shape, self.sphere_shape])
+
     def arrays(self) -> SceneArrays:
         s = self.shapes
-        return SceneArrays(self.face_shape, s.code, s.params, s.material, s.size, self.materials.code,
+        return SceneArrays(self.prim_shape, s.code, s.params, s.material, s.size, self.materials.code,
                            self.materials.params, self.tile, self.z_top, self.z_bottom)
 
 
@@ -103,6 +114,7 @@ class SceneBuilder:
     def __init__(self, tile: float):
         self.tile = tile
         self.vertices, self.faces, self.face_shape, self.shapes, self.materials = [], [], [], [], []
+        self.spheres, self.sphere_shape = [], []
         self.n_vertices = self.n_shapes = 0
 
     def add(self, vertices, faces, face_shape, shapes: Shapes, material: Material) -> None:
@@ -110,9 +122,19 @@ class SceneBuilder:
         self.vertices.append(vertices)
         self.faces.append(faces + self.n_vertices)
         self.face_shape.append(face_shape + self.n_shapes)
+        self.n_vertices += len(vertices)
+        self._add_shapes(shapes, material)
+
+    def add_spheres(self, centres, radius: float, material: Material) -> None:
+        """Exact spheres, Embree's native primitive: one float4 (x, y, z, r) and one shape each."""
+        n = len(centres)
+        self.spheres.append(np.column_stack([centres, np.full(n, radius)]))
+        self.sphere_shape.append(np.arange(n, dtype=np.int32) + self.n_shapes)
+        self._add_shapes(Shapes.spheres(centres, radius, radius), material)
+
+    def _add_shapes(self, shapes: Shapes, material: Material) -> None:
         self.shapes.append(dataclasses.replace(shapes, material=np.full(len(shapes), len(self.materials), np.int32)))
         self.materials.append(material)
-        self.n_vertices += len(vertices)
         self.n_shapes += len(shapes)
 
     def add_base_plane(self, z: float, material: Material) -> None:
@@ -124,7 +146,10 @@ class SceneBuilder:
         self.add(vertices, faces, np.zeros(2, np.int32), plane, material)
 
     def build(self, z_top: float, z_bottom: float, info: dict) -> Scene:
-        faces = np.concatenate(self.faces)
-        return Scene(np.concatenate(self.vertices), faces, np.concatenate(self.face_shape),
-                     Shapes.concatenate(self.shapes), MaterialTable.of(self.materials), self.tile, z_top, z_bottom,
-                     dict(info, triangles=int(len(faces))))
+        faces = np.concatenate(self.faces or [np.zeros((0, 3), np.int32)])
+        return Scene(np.concatenate(self.vertices or [np.zeros((0, 3))]), faces,
+                     np.concatenate(self.face_shape or [np.zeros(0, np.int32)]), Shapes.concatenate(self.shapes),
+                     MaterialTable.of(self.materials), self.tile, z_top, z_bottom,
+                     dict(info, triangles=int(len(faces))),
+                     np.concatenate(self.spheres or [np.zeros((0, 4))]),
+                     np.concatenate(self.sphere_shape or [np.zeros(0, np.int32)]))

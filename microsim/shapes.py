@@ -90,7 +90,7 @@ class Shapes:
         return Shapes(np.full(n, ELLIPSOID, np.int32), params, np.zeros(n, np.int32), np.min(semi_axes, axis=1))
 
 
-@numba.njit(cache=True, error_model="numpy", _nrt=False)
+@numba.njit(cache=True, error_model="numpy", _nrt=False, inline="always")
 def surface_point(code, prm, h):
     """Project the hit h = (x, y, z) onto the analytic shape; return the point and unit normal."""
     x, y, z = h

@@ -82,6 +82,8 @@ def write(path: str | Path, result, config) -> Path:
             h5.attrs["realizations"] = plan.realizations
             h5.attrs["paths_per_realization"] = plan.paths_per_realization
             h5.attrs["max_order"] = config.run.max_order
+            h5.attrs["backend"] = plan.backend
+            h5.attrs["backend_fallback"] = plan.backend_note
             h5["incidence/theta"] = plan.theta_i
             h5["incidence/phi"] = plan.phi_i
             t_lo, t_hi, p_lo, p_hi = sensor.cell_bounds()

@@ -5,7 +5,6 @@ import sys
 from pathlib import Path
 
 import h5py
-import numpy as np
 import pytest
 
 from microsim.cli import main
@@ -42,22 +41,24 @@ def datasets(path):
     return out, attrs, scene
 
 
-def test_tables_are_bit_identical_for_any_number_of_workers(tmp_path):
+def test_tables_are_bit_identical_for_any_number_of_workers_and_threads(tmp_path):
     config = tmp_path / "small.toml"
     config.write_text(SPHERES)
-    one, two = tmp_path / "one.h5", tmp_path / "two.h5"
-    for out, workers in ((one, "1"), (two, "2")):
-        done = subprocess.run([sys.executable, "-m", "microsim.cli", "run", str(config), "--out", str(out),
-                               "--workers", workers], capture_output=True, text=True)
+    tables = {}
+    for flags in (["--workers", "1"], ["--workers", "2"], ["--threads", "2"], ["--workers", "2", "--threads", "2"]):
+        out = tmp_path / f"{'-'.join(flags)}.h5"
+        done = subprocess.run([sys.executable, "-m", "microsim.cli", "run", str(config), "--out", str(out), *flags],
+                              capture_output=True, text=True)
         assert done.returncode == 0, done.stderr
         assert f"table written to {out}" in done.stdout
-    (d1, a1, s1), (d2, a2, s2) = datasets(one), datasets(two)
-    assert d1.keys() == d2.keys() and a1.keys() == a2.keys() and s1 == s2
-    for key in d1:
-        assert d1[key].dtype == d2[key].dtype and np.array_equal(d1[key], d2[key]), key
-        assert d1[key].tobytes() == d2[key].tobytes(), key
-    for key in a1:
-        assert a1[key] == a2[key], key
+        tables[out.name] = datasets(out)
+    (d1, a1, s1), *others = tables.values()
+    for d2, a2, s2 in others:
+        assert d1.keys() == d2.keys() and a1.keys() == a2.keys() and s1 == s2
+        for key in d1:
+            assert d1[key].dtype == d2[key].dtype and d1[key].tobytes() == d2[key].tobytes(), key
+        for key in a1:
+            assert a1[key] == a2[key], key
 
 
 def test_existing_table_is_not_overwritten_without_force(tmp_path, capsys):
@@ -92,6 +93,7 @@ BAD_CONFIGS = {
     "unknown section": (lambda text: text + "\n[extra]\nfoo = 1\n", "extra"),
     "missing run section": (edit("[run]\npaths = 20_000\nrealizations = 4\nseed = 5\n", ""), "run"),
     "one realization": (edit("realizations = 4", "realizations = 1"), "run.realizations"),
+    "unknown backend": (edit("seed = 5", 'seed = 5\nbackend = "gpu"'), "run.backend"),
     "base under a plane": (lambda text: text.replace('kind = "poisson_spheres"\nvolume_fraction = 0.3\ntile = 16.0\ndepth = 8.0',
                                                      'kind = "plane"') + '\n[base]\nkind = "absorber"\n', "base"),
 }
@@ -114,6 +116,9 @@ def test_bad_config_gives_one_line_naming_the_key_and_exit_2(case, tmp_path, cap
 @pytest.mark.parametrize("argv, key", [
     (["run", "missing.toml"], "missing.toml"),
     (["run", "{config}", "--workers", "0"], "--workers"),
+    (["run", "{config}", "--threads", "0"], "--threads"),
+    (["run", "{config}", "--threads", "100000"], "--threads"),
+    (["run", "{config}", "--backend", "gpu"], "--backend"),
     (["run", "{config}", "--paths", "many"], "--paths"),
     (["run", "{config}", "--seed", "-1"], "--seed"),
     (["run", "{config}", "--out", "/no/such/dir/t.h5"], "--out"),

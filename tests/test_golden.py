@@ -1,16 +1,18 @@
-"""Bit identity: two small tables traced now equal, byte for byte, the golden ones checked in.
+"""Bit identity: three small tables traced now equal, byte for byte, the golden ones checked in.
 
 ``tests/data/golden_<name>.npz`` holds every dataset of the table that ``GOLDEN[name]`` gave
 when it was last regenerated, and the platform it was made on (machine and widest SIMD
 instruction set: Embree picks its kernels by it, so float32 hit distances may differ in the last
-bit elsewhere; on another platform the test skips and says so). Between
-them the two configs reach every tracer event: Lambertian, interfaced-Lambertian and conductor
-interactions, Russian roulette, pass-through of overlapping spheres, side wraps, a base plane,
-transmission through the slab and truncation by ``max_order``. Any change that moves a single
+bit elsewhere; on another platform the test skips and says so). The
+two tessellated configs run on the embreex backend, whose tables are those of c8660dd, the
+commit before issue 7; ``exact`` runs native spheres on the direct backend. Between them they
+reach every tracer event: Lambertian, interfaced-Lambertian and conductor interactions, Russian
+roulette, pass-through of overlapping spheres, side wraps, a base plane, transmission through
+the slab and truncation by ``max_order``. Any change that moves a single
 bit of a table fails here, with the size of the largest move. A change meant to move results
 (new physics, another sampling order) regenerates them, and its commit message says why:
 
-    python tests/test_golden.py --regenerate
+    python tests/test_golden.py --regenerate [NAME ...]
 """
 
 from __future__ import annotations
@@ -35,14 +37,22 @@ GOLDEN = {
         "base": {"kind": "interfaced_lambert", "albedo": 0.7, "eta": 1.5},
         "illumination": {"theta_i_deg": [0.0, 70.0]},
         "sensor": {"cells": 20},
-        "run": {"paths": 4000, "realizations": 2, "seed": 3},
+        "run": {"paths": 4000, "realizations": 2, "seed": 3, "backend": "embreex"},
     },
     "conductor": {
         "scene": {"kind": "poisson_spheres", "volume_fraction": 0.4, "tile": 8.0, "depth": 3.0, "subdivisions": 1},
         "material": {"kind": "conductor", "eta": 0.2, "k": 3.0},
         "illumination": {"theta_i_deg": [30.0, 85.0]},
         "sensor": {"cells": 20},
-        "run": {"paths": 2000, "realizations": 2, "seed": 4, "max_order": 3},
+        "run": {"paths": 2000, "realizations": 2, "seed": 4, "max_order": 3, "backend": "embreex"},
+    },
+    "exact": {
+        "scene": {"kind": "poisson_spheres", "volume_fraction": 0.3, "tile": 8.0, "depth": 4.0},
+        "material": {"kind": "lambert", "albedo": 0.9},
+        "base": {"kind": "lambert", "albedo": 0.5},
+        "illumination": {"theta_i_deg": [0.0, 70.0]},
+        "sensor": {"cells": 20},
+        "run": {"paths": 4000, "realizations": 2, "seed": 3, "backend": "direct"},
     },
 }
 
@@ -92,18 +102,19 @@ def test_table_is_bit_identical_to_the_golden_one(name, tmp_path):
 
 
 def test_the_golden_tables_reach_every_tracer_event():
-    (spheres, _), (conductor, _) = load_golden("spheres"), load_golden("conductor")
+    (spheres, _), (conductor, _), (exact, _) = (load_golden(name) for name in ("spheres", "conductor", "exact"))
     assert np.all(spheres["diagnostics/roulette_kills"] > 0) and np.all(spheres["diagnostics/inside_hits"] > 0)
+    assert np.all(exact["diagnostics/roulette_kills"] > 0)
     assert np.all(conductor["energy/transmitted"] > 0) and np.all(conductor["energy/truncated"] > 0)
     assert np.all(spheres["albedo_order"][:, 3] > 0)  # paths reach order 4+
 
 
-def regenerate() -> None:
+def regenerate(names) -> None:
     import tempfile
 
     DATA.mkdir(exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
-        for name in GOLDEN:
+        for name in names:
             arrays = trace(name, Path(tmp))
             np.savez_compressed(golden_path(name), platform=np.array(platform_key()),
                                 **{key.replace("/", "."): value for key, value in arrays.items()})
@@ -111,6 +122,6 @@ def regenerate() -> None:
 
 
 if __name__ == "__main__":
-    if sys.argv[1:] != ["--regenerate"]:
-        sys.exit("usage: python tests/test_golden.py --regenerate")
-    regenerate()
+    if sys.argv[1:2] != ["--regenerate"] or not set(sys.argv[2:]) <= set(GOLDEN):
+        sys.exit(f"usage: python tests/test_golden.py --regenerate [NAME ...] (names: {', '.join(GOLDEN)})")
+    regenerate(sys.argv[2:] or list(GOLDEN))

@@ -7,8 +7,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 import geometry
-from microsim import config, materials
-from microsim.integrators.surface import embree_scene
+from microsim import config, embree, materials
 from microsim.rng import geometry_rng
 
 SPHERES = geometry.SCENES["poisson_spheres"]
@@ -43,14 +42,16 @@ def test_void_fraction_is_one_minus_phi(phi):
     assert abs(np.mean(fractions) - (1 - phi)) <= 4 * stderr
 
 
-def test_void_free_path_is_exponential_with_mean_l():
+@pytest.mark.parametrize("model", [{"subdivisions": 1}, {}], ids=["icosphere-1", "exact"])
+def test_void_free_path_is_exponential_with_mean_l(model):
     """Rays from random void points in random directions: chords of mean l = 4 / (-3 ln(1 - phi)).
 
-    The meshes are scaled to the sphere's area, so by Cauchy's formula their mean projected
-    area is pi and the mean free path is exactly l whatever the tessellation (randomly rotated).
+    Exact spheres have it by construction. The meshes are scaled to the sphere's area, so by
+    Cauchy's formula their mean projected area is pi and the mean free path is exactly l whatever
+    the tessellation (randomly rotated).
     """
     phi = 0.3
-    cfg = scene_config(volume_fraction=phi, tile=24.0, depth=24.0, subdivisions=1)
+    cfg = scene_config(volume_fraction=phi, tile=24.0, depth=24.0, **model)
     l = 4.0 / (-3.0 * math.log(1 - phi))
     rng = np.random.default_rng(1)
     cap = 6.0  # rays start 6 radii inside the tile and slab, so distances are observed up to 6
@@ -62,11 +63,10 @@ def test_void_free_path_is_exponential_with_mean_l():
         points = points[cKDTree(centres).query(points)[0] > scene.shapes.params[0, 4]]  # outside every mesh
         d = rng.normal(size=points.shape)
         d /= np.linalg.norm(d, axis=1)[:, None]
-        hit = embree_scene(scene).run(points.astype(np.float32), d.astype(np.float32),
-                                 dists=np.full(len(points), cap, np.float32), output=1)
-        observed = hit["primID"] >= 0
+        prim, t, _ = embree.Scene(scene.vertices, scene.faces, scene.spheres).intersect(
+            points, d, np.full(len(points), cap))
         # censored exponential: maximum likelihood = total observed length / number of hits
-        estimates.append(np.minimum(hit["tfar"], cap).sum() / observed.sum())
+        estimates.append(np.minimum(t, cap).sum() / (prim >= 0).sum())
     stderr = np.std(estimates, ddof=1) / math.sqrt(len(estimates))
     assert abs(np.mean(estimates) - l) <= 4 * stderr
     assert stderr < 0.02 * l  # resolves the 7.5 % bias an unscaled (inscribed) level-1 mesh would have
@@ -101,7 +101,8 @@ def test_every_sphere_reaching_into_the_tile_is_present():
             inside = np.all((shifted[:, :2] > -reach) & (shifted[:, :2] < 16.0 + reach), axis=1)
             distance, _ = tree.query(shifted[inside])
             assert np.all(distance < 1e-9)
-    assert scene.n_triangles == len(centres) * scene.info["triangles_per_sphere"]
+    assert len(scene.spheres) == len(centres) and scene.n_triangles == 0  # exact spheres: one primitive each
+    assert np.array_equal(scene.spheres[:, :3], centres.astype(np.float32)) and np.all(scene.spheres[:, 3] == 1.0)
 
 
 def test_defaults_follow_the_free_path_and_are_recorded():

@@ -17,13 +17,12 @@ Both runs use the default tile (64 radii): a 24-radius tile adds periodic "ghost
 between the incoming ray and images of the outgoing one, visible at theta_i >= 60 deg.
 """
 
-import math
-
 import numpy as np
 import pytest
 
 from microsim import models
 from microsim.models.radiative_transfer import single_scattering
+from stat_bounds import chi2_bound
 
 ALBEDO = 0.9
 REALIZATIONS = 16
@@ -50,15 +49,6 @@ def away_from_retro(table, wi):
     return np.degrees(np.arccos(np.clip(table.direction @ wi, -1, 1))) > 10.0
 
 
-def chi2_bound(n_cells):
-    """Upper bound on the mean z^2 over n cells, z Student-t with R - 1 degrees of freedom
-    (stderr from R realizations): mean nu / (nu - 2), variance of z^2 2 nu^2 (nu - 1) /
-    ((nu - 2)^2 (nu - 4)), plus 5 standard deviations of the mean."""
-    nu = REALIZATIONS - 1
-    variance = 2 * nu**2 * (nu - 1) / ((nu - 2) ** 2 * (nu - 4))
-    return nu / (nu - 2) + 5 * math.sqrt(variance / n_cells)
-
-
 def test_order_1_tends_to_radiative_transfer_for_dilute_spheres(simulate):
     table = single_scattering_table(simulate, 0.005)
     assert np.all(table.brdf_order[:, 1:, :] == 0.0)
@@ -72,7 +62,7 @@ def test_order_1_at_phi_002_follows_the_finite_size_model_not_point_scatterers(s
     table = single_scattering_table(simulate, 0.02)
     model = models.create("boolean_spheres_single", albedo=ALBEDO, volume_fraction=0.02)
     order_1, stderr = table.brdf_order[:, 0, :], table.arrays["brdf_order_stderr"][:, 0, :]
-    bound = chi2_bound(table.sensor.n_cells)
+    bound = chi2_bound(table.sensor.n_cells, REALIZATIONS)
     for i, wi in enumerate(table.wi):
         finite = table.sensor.cell_average(lambda wo: model(wi, wo), 6, 6)
         points = point_scatterers(table.sensor, wi)

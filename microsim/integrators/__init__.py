@@ -1,10 +1,11 @@
 """Integrators: what traces a scene. Each generator names its own (``geometry`` module attribute
 ``INTEGRATOR``), and the runner looks it up here, so that it assumes neither triangles nor Embree.
 
-An integrator is a class built from one realization of a scene and the sensor,
-``Tracer(scene, sensor)``, with ``trace(wi, n_paths, key, max_order) -> records.Tally`` (the
-paths of one unit of work, on the random stream ``key``) and a classmethod ``compile(sensor)``
-that compiles its kernels before worker processes fork. The per-path records and the events
+An integrator is a class built from one realization of a scene, the sensor and the run's
+options, ``Tracer(scene, sensor, backend=..., threads=...)``, with
+``trace(wi, n_paths, key, max_order) -> records.Tally`` (the paths of one unit of work, on the
+random stream ``key``; the tally must not depend on ``threads``) and a classmethod
+``compile(sensor, **options)`` that compiles its kernels before worker processes fork. The per-path records and the events
 every integrator shares (exit and binning, roulette, truncation) are in :mod:`.records` and
 :mod:`.events`.
 """

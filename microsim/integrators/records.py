@@ -31,9 +31,9 @@ Paths = namedtuple("Paths", PATH_FIELDS)
 #: (n, 3), the distance ``tfar`` to the end of the segment, and which boundary ends it (``end``)
 Rays = namedtuple("Rays", ["origin", "direction", "tfar", "end"])
 
-#: Embree's answer for each ray: the primitive hit (-1: none; then ``Rays.tfar`` is unchanged)
-#: and its unnormalised geometric normal (n, 3), float32; the hit distance is in ``Rays.tfar``
-Hits = namedtuple("Hits", ["prim", "normal"])
+#: the paths of one unit of work: incidence direction wi (float64 (3,)), random stream key
+#: (uint64), number of paths, and max_order (0: unlimited)
+Beam = namedtuple("Beam", ["wi", "key", "n_paths", "max_order"])
 
 #: what a batch of paths produced, sums of weights not yet divided by ``paths``: exits per order
 #: and sensor cell (ORDERS, n_cells), lost energy (ENERGY_NAMES) and event counts (COUNT_NAMES)

@@ -1,29 +1,33 @@
-"""The surface tracer: Embree finds hits for a whole batch of rays, numba does the rest.
+"""The surface tracer: paths through triangles and spheres, one segment and one event at a time.
 
-A batch of paths is traced as a loop of segments (wavefront). Each pass hands every live ray to
-Embree in one call (float32 origins, directions and the distance ``tfar`` to the edge of the
-tile's slab); then :func:`advance` takes every ray through one event: a surface hit is
-projected onto the analytic shape (float64), scattered by its material, roulette'd and offset
-(:func:`interact`); a ray that meets a face from behind passes through (:func:`pass_through`);
-a ray that reaches the tile side wraps to the opposite side (:func:`wrap_side`); a ray that
-reaches ``z_top`` leaves and is binned on the sensor by scattering order; one that reaches
-``z_bottom`` is transmitted. Live paths are compacted in place and their next segment prepared
-in the same pass (:func:`prepare_segment`).
+A path starts at a uniform point of the tile at ``z_top`` (:func:`start_path`). Each segment is
+stored in float32 as Embree takes it, with its distance ``tfar`` to the boundary of the tile's
+slab and which boundary that is (:func:`prepare_segment`). Embree finds the closest hit on it;
+:func:`follow` takes the path through the event there: a surface hit is projected onto the
+analytic shape (float64), scattered by its material, roulette'd and offset (:func:`interact`);
+a ray that meets a surface from behind passes through (:func:`pass_through`); a ray that reaches
+the tile side wraps to the opposite side (:func:`wrap_side`); one that reaches ``z_top`` leaves
+and is binned on the sensor by scattering order; one that reaches ``z_bottom`` is transmitted.
+These kernels are shared by the two backends (:class:`SurfaceTracer`), which differ only in how
+they call Embree and schedule paths: :mod:`.fused` and :mod:`.wavefront`.
 
-Reference counting: :func:`spawn_paths` and :func:`advance` allocate nothing, and are compiled
-without numba's reference-counting runtime (``_nrt=False``), as are the kernels they call
-without inlining (``scatter``, ``surface_point``, ``move_path``; a callee compiled with it
-would bring its increfs along). With it, numba's IR inlining of the event kernels increfs and
-decrefs every array of each bundle passed to them (14 atomic pairs per interaction): the kernel
-ran 80 % slower (0.27 s against 0.15 s for the 1.75 M segments of 200 000 paths on the
-phi = 0.3 scene); without it, 0.13 s. A kernel of the tracer therefore never allocates.
+Reference counting: the backends' kernels allocate nothing and are compiled without numba's
+reference-counting runtime (``_nrt=False``), as are the kernels they call without inlining
+(``scatter``, ``surface_point``, ``move_path``; a callee compiled with it would bring its increfs
+along). With it, numba's IR inlining of the event kernels increfs and decrefs every array of
+each bundle passed to them (14 atomic pairs per interaction): the wavefront kernel ran 80 %
+slower (0.27 s against 0.15 s for the 1.75 M segments of 200 000 paths on the phi = 0.3 scene);
+without it, 0.13 s. A kernel of the tracer therefore never allocates.
 
-Self-intersection: a scattered ray starts from the hit projected onto the analytic surface
-(for spheres and ellipsoids: onto the mesh's circumscribed surface, outside the own convex
-mesh) and offset along the analytic normal by the :func:`clearance` max(OFFSET_SIZE x shape
-size, OFFSET_SPACINGS float32 spacings of the coordinates). A ray that meets a triangle from
-behind is inside a solid by round-off (at the seam of overlapping shapes); it passes through and
-the event is counted.
+Self-intersection: a scattered ray starts from the hit projected onto the analytic surface (for
+meshed spheres and ellipsoids: onto the mesh's circumscribed surface, outside the own convex
+mesh; native spheres are exact) and offset along the analytic normal by the :func:`clearance`
+max(OFFSET_SIZE x shape size, OFFSET_SPACINGS float32 spacings of the coordinates). Embree may
+still report the own sphere at a tiny distance for a grazing ray, from behind (its exit); a ray
+that meets a surface from behind is inside a solid by round-off (also at the seams of
+overlapping shapes): it passes through and the event is counted. Measured on a native sphere of
+radius 1 at coordinates ~40: 0 own-sphere hits in 200 000 outgoing rays at the clearance, and
+at a 1e-6 offset 2212, every one from behind.
 """
 
 from __future__ import annotations
@@ -35,12 +39,10 @@ import numpy as np
 
 from ..materials import Absorber, scatter
 from ..rng import path_state, uniform
-from ..scene import MaterialTable, Scene
-from ..shapes import Shapes, surface_point
-from .events import MAX_IDLE_SEGMENTS, exit_top, move_path, survives_interaction, truncate
-from .records import (
-    ABSORBED, INSIDE_HITS, SEGMENTS, TRANSMITTED, TRUNCATED, Hits, allocate_paths, allocate_rays, empty_tally,
-)
+from ..scene import Scene, SceneBuilder
+from ..shapes import surface_point
+from .events import MAX_IDLE_SEGMENTS, exit_top, survives_interaction, truncate
+from .records import ABSORBED, INSIDE_HITS, TRANSMITTED, TRUNCATED, Beam
 
 #: segment ends: the tile side (wrap), the top (leave), the bottom (transmitted)
 SIDE_X, SIDE_Y, TOP, BOTTOM = 0, 1, 2, 3
@@ -53,27 +55,25 @@ OFFSET_SPACINGS = 8.0
 MIN_PASS_COSINE = 1e-3
 
 
-def embree_scene(scene: Scene):
-    """A committed Embree scene of the triangles (built in the process that traces)."""
-    from embreex import mesh_construction, rtcore_scene
-
-    committed = rtcore_scene.EmbreeScene()
-    mesh_construction.TriangleMesh(committed, scene.vertices, scene.faces)
-    probe = np.zeros((1, 3), np.float32)
-    committed.run(probe, probe + np.float32([0, 0, 1]), dists=np.zeros(1, np.float32))  # commits the BVH
-    return committed
-
-
 class SurfaceTracer:
     """Traces batches of paths through one realization of a surface scene (the integrator of
-    every triangle-based scene kind). ``embree`` replaces the Embree scene built from ``scene``."""
+    every scene kind made of triangles and spheres), on one of two Embree backends:
 
-    def __init__(self, scene: Scene, sensor, embree=None):
-        self.scene = scene
-        self.sensor = sensor
+    - ``"direct"`` (:mod:`.fused`): numba calls Embree itself; a chunk of paths is traced to
+      completion in one call, chunks in parallel on ``threads`` threads sharing the scene;
+      native spheres;
+    - ``"embreex"`` (:mod:`.wavefront`): one ``embreex.run`` call per segment of every live
+      path, then :func:`advance`; triangles only; one thread. The fallback where the direct
+      binding cannot load, and the reference the direct backend is checked against.
+    """
+
+    def __init__(self, scene: Scene, sensor, backend: str = "direct", threads: int = 1):
+        from . import fused, wavefront
+
+        self.scene, self.sensor = scene, sensor
         self.arrays = scene.arrays()
-        self.embree = embree_scene(scene) if embree is None else embree
-        self.paths, self.rays = allocate_paths(0), allocate_rays(0)
+        self.backend = (fused.FusedBackend(scene, threads) if backend == "direct"
+                        else wavefront.WavefrontBackend(scene))
 
     def trace(self, wi, n_paths: int, key, max_order: int):
         """Trace ``n_paths`` paths arriving along -``wi``; return their :class:`~records.Tally`.
@@ -81,99 +81,74 @@ class SurfaceTracer:
         ``key`` selects the random stream (see :mod:`microsim.rng`); ``max_order`` = 0 means
         unlimited, k > 0 truncates a path at its (k+1)-th interaction.
         """
-        if len(self.paths.weight) < n_paths:
-            self.paths, self.rays = allocate_paths(n_paths), allocate_rays(n_paths)
-        paths, rays = self.paths, self.rays
-        tally = empty_tally(n_paths, self.sensor.n_cells)
-        spawn_paths(paths, rays, n_paths, np.uint64(key), np.asarray(wi, np.float64), self.arrays)
-        n = n_paths
-        while n > 0:
-            hit = self.embree.run(rays.origin[:n], rays.direction[:n], dists=rays.tfar[:n], output=1)
-            tally.counts[SEGMENTS] += n
-            n = advance(n, paths, rays, Hits(hit["primID"], hit["Ng"]), self.arrays, self.sensor, max_order, tally)
-        return tally
+        beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order)
+        return self.backend.trace(beam, self.arrays, self.sensor)
 
     @classmethod
-    def compile(cls, sensor) -> None:
-        """Compile (or load from numba's cache) the kernels in this process.
+    def compile(cls, sensor, backend: str = "direct", threads: int = 1) -> None:
+        """Compile (or load from numba's cache) the kernels of ``backend`` in this process.
 
         Called before worker processes are forked, so that they inherit the machine code instead
-        of each loading it again. Every scene has the same array types, so an empty one will do.
+        of each loading it again. Every scene has the same array types, so a small one will do.
         """
-        empty = Scene(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), Shapes.empty(),
-                      MaterialTable.of([Absorber(kind="absorber")]), 1.0, 1.0, -1.0)
-        cls(empty, sensor, _NoHits()).trace(np.array([0.0, 0.0, 1.0]), 1, 0, 0)
+        builder = SceneBuilder(1.0)
+        builder.add_base_plane(-0.5, Absorber(kind="absorber"))
+        cls(builder.build(1.0, -1.0, {}), sensor, backend, threads).trace(np.array([0.0, 0.0, 1.0]), 1, 0, 0)
 
 
-class _NoHits:
-    """Stands in for an Embree scene in which nothing can be hit."""
-
-    @staticmethod
-    def run(origins, directions, dists, output):
-        n = len(origins)
-        return {"primID": np.full(n, -1, np.int32), "Ng": np.zeros((n, 3), np.float32)}
-
-
-@numba.njit(cache=True, error_model="numpy", _nrt=False)
-def spawn_paths(paths, rays, n, key, wi, scene):
-    """Start n paths at uniform positions of the tile at z_top, travelling along -wi."""
-    for i in range(n):
-        paths.rng[i] = path_state(key, i)
-        x = uniform(paths.rng, i) * scene.tile
-        y = uniform(paths.rng, i) * scene.tile
-        paths.weight[i] = 1.0
-        paths.order[i] = 0
-        paths.idle[i] = 0
-        prepare_segment(rays, i, (x, y, scene.z_top), (-wi[0], -wi[1], -wi[2]), scene)
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def start_path(paths, rays, i, number, beam, scene):
+    """Path ``number`` of the beam starts in row i: a uniform point of the tile at z_top, along -wi."""
+    paths.rng[i] = path_state(beam.key, number)
+    x = uniform(paths.rng, i) * scene.tile
+    y = uniform(paths.rng, i) * scene.tile
+    paths.weight[i] = 1.0
+    paths.order[i] = 0
+    paths.idle[i] = 0
+    prepare_segment(rays, i, (x, y, scene.z_top), (-beam.wi[0], -beam.wi[1], -beam.wi[2]), scene)
 
 
-@numba.njit(cache=True, error_model="numpy", _nrt=False)
-def advance(n, paths, rays, hits, scene, sensor, max_order, tally):
-    """Take every live ray through the segment Embree traced; compact survivors; return their count.
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def follow(paths, rays, i, hit, scene, sensor, max_order, tally):
+    """Path i traced the segment in row i of ``rays`` and met ``hit`` = (primitive or -1, its
+    distance t, Embree's float32 geometric normal); take it through the event there.
 
-    ``rays.tfar`` holds Embree's hit distances on entry and the next segments' lengths on return
-    (survivor ``live`` is written after ray ``i >= live`` has been read).
+    Returns (alive, origin, direction) of its next segment: a surface hit scatters (or passes a
+    back face, or is truncated by ``max_order``); a miss leaves through the top (binned),
+    the bottom (transmitted) or a tile side (wrapped).
     """
-    live = 0
-    for i in range(n):
-        o = (np.float64(rays.origin[i, 0]), np.float64(rays.origin[i, 1]), np.float64(rays.origin[i, 2]))
-        d = (np.float64(rays.direction[i, 0]), np.float64(rays.direction[i, 1]), np.float64(rays.direction[i, 2]))
-        t = np.float64(rays.tfar[i])  # Embree leaves tfar unchanged on a miss: the segment's length
-        keep = True
-        p = hits.prim[i]
-        if p >= 0:
-            h = (o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2])
-            s = scene.face_shape[p]
-            ng = (hits.normal[i, 0], hits.normal[i, 1], hits.normal[i, 2])
-            facing = d[0] * ng[0] + d[1] * ng[1] + d[2] * ng[2]
-            if facing >= 0.0:
-                tally.counts[INSIDE_HITS] += 1
-                o = pass_through(h, d, facing, ng, scene.shape_size[s], scene.tile)
-                paths.idle[i] += 1
-            elif max_order > 0 and paths.order[i] >= max_order:
-                truncate(paths, i, tally)
-                keep = False
-            else:
-                keep, o, d = interact(paths, i, h, d, s, scene, tally)
-        else:
-            end = rays.end[i]
-            if end == TOP:
-                exit_top(paths, i, d, sensor, tally)
-                keep = False
-            elif end == BOTTOM:
-                tally.energy[TRANSMITTED] += paths.weight[i]
-                keep = False
-            else:
-                paths.idle[i] += 1
-                o = wrap_side(o, d, t, end, scene.tile)
-        if keep and paths.idle[i] >= MAX_IDLE_SEGMENTS:
+    o = (np.float64(rays.origin[i, 0]), np.float64(rays.origin[i, 1]), np.float64(rays.origin[i, 2]))
+    d = (np.float64(rays.direction[i, 0]), np.float64(rays.direction[i, 1]), np.float64(rays.direction[i, 2]))
+    p, t, ng = hit
+    keep = True
+    if p >= 0:
+        h = (o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2])
+        s = scene.prim_shape[p]
+        facing = d[0] * ng[0] + d[1] * ng[1] + d[2] * ng[2]
+        if facing >= 0.0:
+            tally.counts[INSIDE_HITS] += 1
+            o = pass_through(h, d, facing, ng, scene.shape_size[s], scene.tile)
+            paths.idle[i] += 1
+        elif max_order > 0 and paths.order[i] >= max_order:
             truncate(paths, i, tally)
             keep = False
-        if keep:
-            move_path(paths, live, i)
-            prepare_segment(rays, live, o, d, scene)
-            live += 1
-    return live
+        else:
+            keep, o, d = interact(paths, i, h, d, s, scene, tally)
+    else:
+        end = rays.end[i]
+        if end == TOP:
+            exit_top(paths, i, d, sensor, tally)
+            keep = False
+        elif end == BOTTOM:
+            tally.energy[TRANSMITTED] += paths.weight[i]
+            keep = False
+        else:
+            paths.idle[i] += 1
+            o = wrap_side(o, d, t, end, scene.tile)
+    if keep and paths.idle[i] >= MAX_IDLE_SEGMENTS:
+        truncate(paths, i, tally)
+        keep = False
+    return keep, o, d
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

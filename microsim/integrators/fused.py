@@ -1,0 +1,125 @@
+"""The direct backend of the surface tracer: numba calls Embree itself, paths run to completion.
+
+The paths of a unit are cut into chunks of ``CHUNK_PATHS`` consecutive paths, and the chunks
+into waves of up to ``WAVE_CHUNKS``. Each chunk is traced to completion into a tally of its own:
+its paths one after the other, segment after segment (``rtcIntersect1`` on an ``RTCRayHit``
+record of its own, then the shared event kernels of :mod:`.surface`), with no Python between
+segments. ``threads`` Python threads share a wave, one numba call (:func:`trace_chunks`) each
+for a contiguous share of its chunks; the call releases the GIL, and all threads share one
+committed Embree scene. The chunk tallies are then summed in chunk order. A path's random stream is keyed by its number, so a table depends neither
+on the number of threads nor on which thread traced which chunk: bit-identical for any thread
+count. Memory is one scene per process, a few hundred bytes per chunk row, and the tallies of
+one wave (WAVE_CHUNKS x 4 x cells doubles).
+
+Python threads rather than a numba ``prange``: numba's parallel loops take no tuples of arrays
+(the named bundles), and its OpenMP layer is not fork-safe (the runner forks worker processes
+after compiling; a process forked after GNU OpenMP ran aborts). With one call per chunk the
+Python around the calls (numba's typing of the bundles, the pool) took 12 % of the time; with
+one call per thread and wave it is negligible.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+from concurrent.futures import ThreadPoolExecutor
+
+import numba
+import numpy as np
+
+from .. import embree
+from .records import ORDERS, SEGMENTS, Rays, Tally, allocate_paths, empty_tally
+from .surface import follow, prepare_segment, start_path
+
+#: paths of one chunk: traced in order by one thread, into a tally of their own
+CHUNK_PATHS = 256
+#: chunks traced in parallel by one call; their tallies are then summed in chunk order
+WAVE_CHUNKS = 64
+
+#: one row per chunk of a wave: the path it is tracing, its segment, its Embree query, its tally;
+#: and the ray log (origin, direction, tfar of every query, in order; empty unless asked for)
+Workspace = namedtuple("Workspace", ["paths", "rays", "records", "exit_weight", "energy", "counts", "log",
+                                     "logged"])
+
+
+def workspace(rows: int, n_cells: int, log_rays: int = 0) -> Workspace:
+    tally = empty_tally(0, n_cells)
+    records = embree.ray_hits(rows)
+    rays = Rays(*embree.ray_views(records), np.zeros(rows, np.int8))  # segments written into the queries
+    return Workspace(allocate_paths(rows), rays, records,
+                     np.zeros((rows, ORDERS, n_cells)), np.zeros((rows, len(tally.energy))),
+                     np.zeros((rows, len(tally.counts)), np.int64), np.zeros((log_rays, 7), np.float32),
+                     np.zeros(1, np.int64))
+
+
+class FusedBackend:
+    """The scene in a committed Embree scene of its own, traced by chunks on ``threads`` threads.
+
+    ``log_rays`` > 0 (one thread only) keeps the first ``log_rays`` queries, in the order they
+    are made, in ``ray_log`` (rows of origin, direction, tfar): the throughput benchmark replays
+    them through Embree alone.
+    """
+
+    name = "direct"
+
+    def __init__(self, scene, threads: int = 1, log_rays: int = 0):
+        if log_rays and threads != 1:
+            raise ValueError("the ray log keeps the order of one thread: give threads = 1")
+        self.embree = embree.Scene(scene.vertices, scene.faces, scene.spheres)
+        self.threads, self.log_rays = threads, log_rays
+        self.ray_log = np.zeros((0, 7), np.float32)
+
+    def trace(self, beam, scene, sensor):
+        n_chunks = math.ceil(beam.n_paths / CHUNK_PATHS)
+        work = workspace(min(WAVE_CHUNKS, max(n_chunks, 1)), sensor.n_cells, self.log_rays)
+        total = empty_tally(beam.n_paths, sensor.n_cells)
+        handle = self.embree.arrays()
+        with ThreadPoolExecutor(self.threads) as pool:
+            for first in range(0, n_chunks, WAVE_CHUNKS):
+                count = min(WAVE_CHUNKS, n_chunks - first)
+                edges = np.linspace(0, count, self.threads + 1).round().astype(np.int64)
+                shares = [(first, int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+                list(pool.map(lambda share: trace_chunks(*share, beam, scene, handle, sensor, work), shares))
+                for j in range(count):  # in chunk order, whatever thread traced which chunk
+                    total.exit_weight[:] += work.exit_weight[j]
+                    total.energy[:] += work.energy[j]
+                    total.counts[:] += work.counts[j]
+        self.ray_log = work.log[:min(work.logged[0], len(work.log))]
+        return total
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def trace_chunks(first, start, stop, beam, scene, handle, sensor, work):
+    """Trace chunks first+start .. first+stop-1 of the beam to completion, chunk first+j in row j."""
+    for j in range(start, stop):
+        tally = Tally(0, work.exit_weight[j], work.energy[j], work.counts[j])
+        tally.exit_weight[:] = 0.0
+        tally.energy[:] = 0.0
+        tally.counts[:] = 0
+        chunk = first + j
+        for number in range(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths)):
+            start_path(work.paths, work.rays, j, number, beam, scene)
+            alive = True
+            while alive:
+                hit = intersect(handle, work, j)
+                tally.counts[SEGMENTS] += 1
+                alive, o, d = follow(work.paths, work.rays, j, hit, scene, sensor, beam.max_order, tally)
+                if alive:
+                    prepare_segment(work.rays, j, o, d, scene)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def intersect(handle, work, j):
+    """Embree's closest hit on the segment in row j: (primitive or -1, distance, normal)."""
+    rays = work.rays
+    embree.clear_hit(work.records[j])  # the segment is in the query already (prepare_segment)
+    if len(work.log):
+        k = work.logged[0]
+        work.logged[0] = k + 1
+        if k < len(work.log):
+            for axis in range(3):
+                work.log[k, axis] = rays.origin[j, axis]
+                work.log[k, 3 + axis] = rays.direction[j, axis]
+            work.log[k, 6] = rays.tfar[j]
+    prim, t, normal = embree.closest_hit(handle.handle, handle.prim_offset, work.records, j)
+    return prim, np.float64(t), normal

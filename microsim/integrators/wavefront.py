@@ -1,0 +1,97 @@
+"""The embreex backend of the surface tracer: one ``embreex.run`` call per segment of all live paths.
+
+A batch of paths is traced as a loop of segments (wavefront). Each pass hands every live ray to
+Embree through embreex in one call, then :func:`advance` takes every ray through its event
+(:func:`~microsim.integrators.surface.follow`), compacts the live paths in place and prepares
+their next segments. Every pass goes through Python and embreex, which loops over single rays
+and allocates its outputs; the fused backend does without both. This one needs nothing but the
+embreex package: it is the fallback where the direct binding cannot load, and it traces
+triangles only.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from .events import move_path
+from .records import SEGMENTS, allocate_paths, allocate_rays, empty_tally
+from .surface import follow, prepare_segment, start_path
+
+
+class WavefrontBackend:
+    """The scene's triangles in an embreex scene, traced a segment of every live path at a time."""
+
+    name = "embreex"
+
+    def __init__(self, scene, embree=None):
+        """``embree``: any object with embreex's ``run(origins, directions, dists, output=1)`` in
+        place of the embreex scene of ``scene`` (the throughput benchmark records rays through it)."""
+        if embree is None and len(scene.spheres):
+            raise ValueError("native spheres need the direct Embree backend (backend = \"direct\"); "
+                             "the embreex backend traces triangles only (give subdivisions or mesh_error)")
+        self.embree = embree_scene(scene.vertices, scene.faces) if embree is None else embree
+        self.paths, self.rays = allocate_paths(0), allocate_rays(0)
+
+    def trace(self, beam, scene, sensor):
+        n = beam.n_paths
+        if len(self.paths.weight) < n:
+            self.paths, self.rays = allocate_paths(n), allocate_rays(n)
+        paths, rays = self.paths, self.rays
+        tally = empty_tally(n, sensor.n_cells)
+        spawn_paths(paths, rays, n, beam, scene)
+        while n > 0:
+            hit = self.embree.run(rays.origin[:n], rays.direction[:n], dists=rays.tfar[:n], output=1)
+            tally.counts[SEGMENTS] += n
+            n = advance(n, paths, rays, (hit["primID"], hit["Ng"]), scene, sensor, beam.max_order, tally)
+        return tally
+
+
+def embree_scene(vertices, faces):
+    """A committed embreex scene of the triangles (built in the process that traces)."""
+    from embreex import mesh_construction, rtcore_scene
+
+    committed = rtcore_scene.EmbreeScene()
+    if len(faces):
+        mesh_construction.TriangleMesh(committed, vertices, faces)
+        probe = np.zeros((1, 3), np.float32)
+        committed.run(probe, probe + np.float32([0, 0, 1]), dists=np.zeros(1, np.float32))  # commits the BVH
+    else:
+        committed = _NoHits()
+    return committed
+
+
+class _NoHits:
+    """Stands in for an embreex scene in which nothing can be hit."""
+
+    @staticmethod
+    def run(origins, directions, dists, output):
+        n = len(origins)
+        return {"primID": np.full(n, -1, np.int32), "Ng": np.zeros((n, 3), np.float32)}
+
+
+@numba.njit(cache=True, error_model="numpy", _nrt=False)
+def spawn_paths(paths, rays, n, beam, scene):
+    """Start paths 0 .. n-1 of the beam in rows 0 .. n-1."""
+    for i in range(n):
+        start_path(paths, rays, i, i, beam, scene)
+
+
+@numba.njit(cache=True, error_model="numpy", _nrt=False)
+def advance(n, paths, rays, hits, scene, sensor, max_order, tally):
+    """Take every live ray through the segment Embree traced; compact survivors; return their count.
+
+    ``hits`` = (primitive, normal) arrays from embreex; ``rays.tfar`` holds Embree's hit distances
+    on entry (unchanged on a miss: the segment's length) and the next segments' lengths on return
+    (survivor ``live`` is written after ray ``i >= live`` has been read).
+    """
+    prim, normal = hits
+    live = 0
+    for i in range(n):
+        hit = (prim[i], np.float64(rays.tfar[i]), (normal[i, 0], normal[i, 1], normal[i, 2]))
+        keep, o, d = follow(paths, rays, i, hit, scene, sensor, max_order, tally)
+        if keep:
+            move_path(paths, live, i)
+            prepare_segment(rays, live, o, d, scene)
+            live += 1
+    return live
