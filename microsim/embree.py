@@ -164,6 +164,15 @@ class Scene:
         _intersect_all(self.handle, self.prim_offset, origins, directions, tfar, ray_hits(1), prim, t, normal)
         return prim, t, normal
 
+    def occluded(self, origins, directions, tfar) -> np.ndarray:
+        """Whether anything lies on each ray (n, 3) float32 between 0 and ``tfar`` (shadow rays)."""
+        origins = np.ascontiguousarray(origins, np.float32)
+        directions = np.ascontiguousarray(directions, np.float32)
+        tfar = np.ascontiguousarray(tfar, np.float32)
+        blocked = np.empty(len(origins), np.bool_)
+        _occluded_all(self.handle, origins, directions, tfar, ray_hits(1), blocked)
+        return blocked
+
 
 def ray_hits(n: int) -> np.ndarray:
     """n RTCRayHit records, 16-byte aligned as Embree requires, each a query of every geometry
@@ -218,6 +227,22 @@ def _intersect_all(handle, prim_offset, origins, directions, tfar, records, prim
         prim[i] = p
         t[i] = distance
         normal[i, 0], normal[i, 1], normal[i, 2] = ng
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _occluded_all(handle, origins, directions, tfar, records, blocked):
+    for i in range(len(origins)):
+        set_ray(records[0], (origins[i, 0], origins[i, 1], origins[i, 2]),
+                (directions[i, 0], directions[i, 1], directions[i, 2]), tfar[i])
+        blocked[i] = is_occluded(handle, records, 0)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def is_occluded(handle, records, k):
+    """Trace the shadow query in ``records[k]`` (an RTCRay: the first 48 bytes); Embree sets its
+    tfar to -inf when anything blocks it."""
+    rtc_occluded1(handle, records.ctypes.data + k * RAYHIT_BYTES, 0)
+    return records[k].tfar < 0.0
 
 
 @functools.lru_cache(maxsize=None)

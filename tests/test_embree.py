@@ -45,3 +45,12 @@ def test_the_layout_check_refuses_hits_read_from_the_wrong_fields(monkeypatch):
         monkeypatch.setattr(embree.Scene, "intersect", lambda self, o, d, t, answer=answer: answer)
         with pytest.raises(embree.EmbreeUnavailable, match="^RTCRayHit layout check failed"):
             embree._check_layout(embree._open())
+
+
+def test_shadow_rays_are_blocked_by_triangles_and_spheres_only_within_tfar():
+    scene = embree.Scene(vertices=[[0, 0, 0], [2, 0, 0], [0, 2, 0]], faces=[[0, 1, 2]],
+                         spheres=[[5.0, 5.0, 0.0, 1.5]])
+    blocked = scene.occluded([[0.5, 0.5, 3.0], [0.5, 0.5, 3.0], [5.0, 5.0, 4.0], [5.0, 5.0, 4.0], [9, 9, 9]],
+                             [[0, 0, -1], [0, 0, -1], [0, 0, -1], [0, 0, -1], [0, 0, 1]],
+                             [4.0, 2.9, 3.0, 2.4, 10.0])
+    assert blocked.tolist() == [True, False, True, False, False]
