@@ -1,16 +1,18 @@
-"""Albedo and BRDF versus sphere tessellation level (phi = 0.3): is the default level converged?
+"""Albedo and BRDF versus sphere tessellation, with the exact sphere as the limit (phi = 0.3, 0.6).
 
-Runs the same config (same seed, so the same sphere centres and rotations in every
-realization) at icosphere levels 0 .. --finest, and compares every level with the finest:
+Runs the same config (same seed, so the same sphere centres in every realization) with
+icosphere levels 0 .. --finest and with exact native spheres, and compares every level with the
+exact spheres:
 
 - albedo per incidence with its standard error;
-- BRDF: chi-square per cell of (f_level - f_finest) / sqrt(se_level^2 + se_finest^2), whose
-  mean is ~1 when the two tables agree within their errors (conservative: the tables share
-  their geometry, so their difference varies less than two independent tables would);
-- relative change of the albedo, and tracing time (the cost of the accuracy).
+- BRDF: chi-square per cell of (f_level - f_exact) / sqrt(se_level^2 + se_exact^2), whose mean
+  is ~1 when the two tables agree within their errors (conservative: the tables share their
+  sphere centres, so their difference varies less than two independent tables would);
+- tracing time (the cost of the accuracy: triangles per sphere against one sphere primitive).
 
-Writes benchmarks/out/tessellation.png and prints the table; the default level is the one
-chosen by the default mesh-error budget (geometry.poisson_spheres.DEFAULT_MESH_ERROR).
+Writes benchmarks/out/tessellation.png and prints the table (about 4 minutes on 2 cores):
+
+    python benchmarks/tessellation.py [--phis 0.3 0.6] [--finest 4]
 """
 
 from __future__ import annotations
@@ -26,90 +28,107 @@ from microsim import config as config_module
 from microsim import runner
 
 OUT = Path(__file__).resolve().parent / "out"
+EXACT = "exact"
 
 
-def run_level(level: int, paths: int, realizations: int, workers: int):
+def run_model(phi: float, model, paths: int, realizations: int, threads: int):
+    """A run with icosphere level ``model``, or exact spheres; (result, seconds)."""
+    scene = {"kind": "poisson_spheres", "volume_fraction": phi}
+    if model != EXACT:
+        scene["subdivisions"] = model
     cfg = config_module.validate({
-        "scene": {"kind": "poisson_spheres", "volume_fraction": 0.3, "subdivisions": level},
+        "scene": scene,
         "material": {"kind": "lambert", "albedo": 0.8},
         "illumination": {"theta_i_deg": [0.0, 60.0, 85.0]},
         "sensor": {"cells": 800},
         "run": {"paths": paths, "realizations": realizations, "seed": 4},
     })
     start = time.perf_counter()
-    result = runner.run(cfg, workers=workers)
+    result = runner.run(cfg, threads=threads)
     return result, time.perf_counter() - start
+
+
+def versus(result, reference):
+    """(albedo, albedo se, chi-square per cell of the BRDF, |albedo difference| / combined se) per incidence."""
+    albedo = np.array([a.mean[-1] for a in result.albedo])
+    albedo_se = np.array([a.stderr[-1] for a in result.albedo])
+    ref = np.array([a.mean[-1] for a in reference.albedo])
+    ref_se = np.array([a.stderr[-1] for a in reference.albedo])
+    chi2 = []
+    for e, f in zip(result.brdf, reference.brdf):
+        se2 = e.stderr[-1] ** 2 + f.stderr[-1] ** 2
+        ok = se2 > 0
+        chi2.append(np.mean((e.mean[-1][ok] - f.mean[-1][ok]) ** 2 / se2[ok]))
+    z = np.abs(albedo - ref) / np.sqrt(albedo_se**2 + ref_se**2)
+    return albedo, albedo_se, np.array(chi2), z
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--phis", type=float, nargs="+", default=[0.3, 0.6])
     parser.add_argument("--finest", type=int, default=4)
     parser.add_argument("--paths", type=int, default=400_000)
     parser.add_argument("--realizations", type=int, default=16)
-    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--threads", type=int, default=2)
     args = parser.parse_args()
     spheres = geometry.SCENES["poisson_spheres"]
-    default_level = spheres.level_for(spheres.DEFAULT_MESH_ERROR)
     levels = list(range(args.finest + 1))
-    runs = {lv: run_level(lv, args.paths, args.realizations, args.workers) for lv in levels}
-    finest, _ = runs[args.finest]
-    theta = np.degrees(finest.plan.theta_i)
-    rows = []
-    print(f"{'level':>5} {'mesh err':>9} {'tri/sph':>7} {'time s':>7}  albedo (+-se) per incidence        "
-          f"chi2/cell vs finest   max |d albedo|/se")
-    for lv in levels:
-        res, seconds = runs[lv]
-        albedo = np.array([a.mean[-1] for a in res.albedo])
-        albedo_se = np.array([a.stderr[-1] for a in res.albedo])
-        ref = np.array([a.mean[-1] for a in finest.albedo])
-        ref_se = np.array([a.stderr[-1] for a in finest.albedo])
-        chi2 = []
-        for e, f in zip(res.brdf, finest.brdf):
-            se2 = e.stderr[-1] ** 2 + f.stderr[-1] ** 2
-            ok = se2 > 0
-            chi2.append(np.mean((e.mean[-1][ok] - f.mean[-1][ok]) ** 2 / se2[ok]))
-        dz = np.abs(albedo - ref) / np.sqrt(albedo_se**2 + ref_se**2) if lv != args.finest else np.zeros_like(albedo)
-        error = spheres.unit_icosphere(lv)[3]
-        rows.append((lv, error, albedo, albedo_se, np.array(chi2), dz, seconds))
-        marker = " (default)" if lv == default_level else ""
-        print(f"{lv:>5} {error:9.4f} {len(spheres.unit_icosphere(lv)[1]):7d} {seconds:7.1f}  "
-              + " ".join(f"{a:.4f}({s:.4f})" for a, s in zip(albedo, albedo_se))
-              + "   " + " ".join(f"{c:.2f}" for c in chi2) + f"   {dz.max():.2f}{marker}")
+    table = {}
+    for phi in args.phis:
+        runs = {m: run_model(phi, m, args.paths, args.realizations, args.threads) for m in [EXACT, *levels]}
+        exact = runs[EXACT][0]
+        theta = np.degrees(exact.plan.theta_i)
+        print(f"phi = {phi}: every model against exact spheres ({args.realizations} realizations, "
+              f"{args.paths} paths per incidence; theta_i = {', '.join(f'{t:g}' for t in theta)} deg)")
+        print(f"{'model':>8} {'mesh err':>9} {'tri/sph':>7} {'time s':>7}  albedo (+-se) per incidence"
+              f"          chi2/cell vs exact   |d albedo|/se")
+        for model in [*levels, EXACT]:
+            result, seconds = runs[model]
+            albedo, albedo_se, chi2, z = versus(result, exact)
+            error = 0.0 if model == EXACT else spheres.unit_icosphere(model)[3]
+            triangles = 0 if model == EXACT else len(spheres.unit_icosphere(model)[1])
+            table[(phi, model)] = (error, albedo, albedo_se, chi2, z, seconds)
+            print(f"{model!s:>8} {error:9.4f} {triangles:7d} {seconds:7.1f}  "
+                  + " ".join(f"{a:.4f}({s:.4f})" for a, s in zip(albedo, albedo_se))
+                  + "   " + " ".join(f"{c:.2f}" for c in chi2) + "   " + " ".join(f"{v:.2f}" for v in z))
+    chart(table, args.phis, levels, theta)
 
+
+def chart(table, phis, levels, theta):
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     OUT.mkdir(exist_ok=True)
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
-    lv = np.array([r[0] for r in rows])
-    finest_albedo, finest_se = rows[-1][2], rows[-1][3]
-    for j, t in enumerate(theta):
-        axes[0].errorbar(lv[:-1] + 0.05 * j, [r[2][j] - finest_albedo[j] for r in rows[:-1]],
-                         yerr=[np.hypot(r[3][j], finest_se[j]) for r in rows[:-1]], marker="o", capsize=3,
-                         label=f"theta_i = {t:g} deg")
-        axes[1].plot(lv[:-1], [r[4][j] for r in rows[:-1]], marker="o", label=f"theta_i = {t:g} deg")
-    for ax in axes[:2]:
-        ax.axvline(default_level, color="grey", ls="--", lw=1)
-        ax.set_xlabel("icosphere level (triangles per sphere 20 * 4^level)")
-        ax.legend(fontsize=8)
-    axes[0].axhline(0.0, color="k", lw=0.8)
-    axes[0].set_ylabel(f"albedo - albedo at level {args.finest} (+- combined se)")
-    axes[0].set_title("albedo vs tessellation (phi = 0.3, c = 0.8)")
-    axes[1].axhline(1.0, color="k", lw=0.8)
-    axes[1].set_ylabel("mean chi-square per cell vs finest")
-    axes[1].set_yscale("log")
-    axes[1].set_title("BRDF difference to the finest level")
-    axes[2].loglog([r[1] for r in rows], [r[6] for r in rows], marker="o")
-    for r in rows:
-        axes[2].annotate(f"L{r[0]}", (r[1], r[6]))
-    axes[2].set_xlabel("max mesh-to-sphere distance (radii)")
-    axes[2].set_ylabel("run time (s)")
-    axes[2].set_title("cost of accuracy")
+    fig, axes = plt.subplots(len(phis), 3, figsize=(15, 4.2 * len(phis)), squeeze=False)
+    for row, phi in enumerate(phis):
+        ax_albedo, ax_chi2, ax_time = axes[row]
+        exact = table[(phi, EXACT)]
+        for j, t in enumerate(theta):
+            ax_albedo.errorbar(np.array(levels) + 0.05 * j, [table[(phi, m)][1][j] - exact[1][j] for m in levels],
+                               yerr=[np.hypot(table[(phi, m)][2][j], exact[2][j]) for m in levels], marker="o",
+                               capsize=3, label=f"theta_i = {t:g} deg")
+            ax_chi2.plot(levels, [table[(phi, m)][3][j] for m in levels], marker="o", label=f"theta_i = {t:g} deg")
+        ax_albedo.axhline(0.0, color="k", lw=1.2, label="exact spheres (the limit)")
+        ax_albedo.set_ylabel("albedo - exact-sphere albedo (+- combined se)")
+        ax_albedo.set_title(f"albedo vs tessellation (phi = {phi}, c = 0.8)")
+        ax_chi2.axhline(1.0, color="k", lw=0.8)
+        ax_chi2.set_ylabel("mean chi-square per cell vs exact spheres")
+        ax_chi2.set_yscale("log")
+        ax_chi2.set_title("BRDF difference to exact spheres")
+        for ax in (ax_albedo, ax_chi2):
+            ax.set_xlabel("icosphere level (20 * 4^level triangles per sphere)")
+            ax.legend(fontsize=8)
+        ax_time.semilogy(levels, [table[(phi, m)][5] for m in levels], marker="o", label="icospheres")
+        ax_time.axhline(exact[5], color="k", lw=1.2, label="exact spheres")
+        ax_time.set_xlabel("icosphere level")
+        ax_time.set_ylabel("run time (s), builds included")
+        ax_time.set_title("cost of accuracy")
+        ax_time.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(OUT / "tessellation.png", dpi=110)
-    print(f"chart written to {OUT / 'tessellation.png'} (default level {default_level})")
+    print(f"chart written to {OUT / 'tessellation.png'}")
 
 
 if __name__ == "__main__":

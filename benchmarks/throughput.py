@@ -1,18 +1,26 @@
-"""Tracer throughput against raw Embree, and the speed-up of two workers over one.
+"""Throughput of both Embree backends against raw Embree, on the sphere scenes phi = 0.1, 0.3, 0.6.
 
-On one sphere scene (runs/spheres_phi030.toml unless --config is given):
+For each phi (runs/spheres_phi0XX.toml, its first realization and incidence), measured side by
+side in one run, best of --repeats:
 
-1. trace batches with one worker and count path segments per second of tracing (scene
-   building excluded), recording every ray batch handed to Embree;
-2. replay exactly those ray batches through ``embreex`` alone (same calls, same sizes), in the
-   same process right after, for the raw intersection rate;
-3. run the whole config with 2 and 1 workers, three times, alternating (builds included), and
-   take the best time of each for the speed-up (the machine's speed drifts by tens of percent).
+1. old backend (``embreex``: one embreex.run per segment of every live path) on the spheres
+   tessellated at the former default (mesh error 0.01, icosphere level 2): one thread traces
+   --paths paths, recording every ray batch handed to Embree; the batches are replayed through
+   embreex alone: raw embreex rays/s, the tracer's segments/s and paths/s, their ratio, and the
+   tracer's time outside Embree per segment (from the same trace, free of run-to-run drift);
+2. new backend (``direct``: numba calls Embree, fused kernel) on exact native spheres: the same
+   number of paths with 1 and 2 threads, segments/s and paths/s. One more trace logs every query
+   in the order the kernel makes them (``FusedBackend(log_rays=...)``); they are replayed
+   through rtcIntersect1 alone, in that order: raw direct rays/s, and
+   ``direct_ratio_per_thread`` = segments/s with 1 thread / raw direct rays/s on the same rays.
+   (Order matters: the same rays shuffled run 1.5 times slower in Embree.)
+3. whole runs, builds included (--run-paths per incidence, 8 realizations, all 4 incidences):
+   old backend with 1 and 2 worker processes, new backend with 1 and 2 threads, alternated.
 
-``ratio`` = segments_per_s / raw_rays_per_s: the share of Embree's own speed the tracer keeps
-after its numba kernels. ``outside_embree_ns_per_segment`` is the traced time less the time
-inside the Embree calls of the same trace, per segment: what the tracer adds to Embree, measured
-without the drift between two runs that makes the ratio noisy on a shared machine. Prints a table, and with --json one JSON object on the last line.
+Prints a table and writes benchmarks/out/throughput.png; with --json, one JSON object on the
+last line. Its top-level keys ``segments_per_s``, ``raw_rays_per_s``, ``ratio``,
+``speedup_2_workers`` and ``outside_embree_ns_per_segment`` are those of the old backend on
+phi = 0.3, as before; ``scenes`` holds every figure per phi. About 8 minutes on 2 cores.
 """
 
 from __future__ import annotations
@@ -24,94 +32,208 @@ from pathlib import Path
 
 import numpy as np
 
-import geometry
 from microsim import config as config_module
 from microsim import runner
-from microsim.integrators.records import SEGMENTS
-from microsim.integrators.surface import SurfaceTracer
+from microsim.integrators.records import SEGMENTS, Beam
+from microsim.integrators.fused import FusedBackend
+from microsim.integrators.wavefront import WavefrontBackend, embree_scene
 from microsim.rng import geometry_rng, stream_key
 from microsim.sensor import Sensor
 
 ROOT = Path(__file__).resolve().parent.parent
+OUT = Path(__file__).resolve().parent / "out"
+FORMER_MESH_ERROR = 0.01
 
 
-class RecordingScene:
-    """Forwards ``run`` to an Embree scene, keeps a copy of every ray batch, times both."""
+class Recorder:
+    """embreex's ``run`` contract in front of either backend's Embree: keeps a copy of every ray
+    batch and times the calls (copies included: they are the recorder's, not the tracer's)."""
 
-    def __init__(self, scene):
-        self.scene = scene
+    def __init__(self, run):
+        self._run = run
         self.batches = []
         self.seconds = 0.0
 
     def run(self, origins, directions, dists, output):
-        start = time.perf_counter()  # the copies are the recorder's, not the tracer's: timed with Embree
+        start = time.perf_counter()
         self.batches.append((origins.copy(), directions.copy(), dists.copy()))
-        hits = self.scene.run(origins, directions, dists=dists, output=output)
+        hits = self._run(origins, directions, dists)
         self.seconds += time.perf_counter() - start
         return hits
 
 
-def tracer_vs_embree(cfg, paths: int, repeats: int = 3):
+def embreex_run(scene):
+    committed = embree_scene(scene.vertices, scene.faces)
+    return lambda o, d, dists: committed.run(o, d, dists=dists, output=1)
+
+
+def realization(cfg, **scene_keys):
+    cfg = cfg.model_copy(update={"scene": cfg.scene.model_copy(update=scene_keys)})
     plan = runner.Plan.from_config(cfg)
-    generator = geometry.SCENES[cfg.scene.kind]
-    scene = generator.generate(plan.scene, cfg, geometry_rng(cfg.run.seed, 0))
-    tracer = SurfaceTracer(scene, Sensor.build(plan.sensor_cells))
-    embree_scene = tracer.embree
+    return cfg, plan, plan.generator.generate(plan.scene, cfg, geometry_rng(cfg.run.seed, 0))
+
+
+def wavefront_trace(scene, sensor, run, beam):
+    """Trace ``beam`` with the wavefront loop on ``run``; (seconds, tally, recorder)."""
+    recorder = Recorder(run)
+    backend = WavefrontBackend(scene, embree=recorder)
+    start = time.perf_counter()
+    tally = backend.trace(beam, scene.arrays(), sensor)
+    return time.perf_counter() - start, tally, recorder
+
+
+def replay(batches, run) -> float:
+    start = time.perf_counter()
+    for origins, directions, dists in batches:
+        run(origins, directions, dists.copy())
+    return time.perf_counter() - start
+
+
+def fused_trace(scene, sensor, beam, threads: int, log_rays: int = 0):
+    """(seconds, tally, backend) of the direct backend tracing ``beam``."""
+    backend = FusedBackend(scene, threads, log_rays)
+    start = time.perf_counter()
+    tally = backend.trace(beam, scene.arrays(), sensor)
+    return time.perf_counter() - start, tally, backend
+
+
+def measure_scene(cfg, paths: int, repeats: int) -> dict:
+    """Figures 1 and 2 of the module docstring for one config."""
+    sensor = Sensor.build(cfg.sensor.cells)
+    _, plan, mesh = realization(cfg, mesh_error=FORMER_MESH_ERROR)
+    _, _, exact = realization(cfg, mesh_error=None, subdivisions=None)
     wi = plan.incidence_direction(0)
-    tracer.trace(wi, 1000, stream_key(0, 0, 0), 0)  # compile
-    best_trace, best_raw, best_outside, segments = np.inf, np.inf, np.inf, 0
+    out = {"triangles": mesh.n_triangles, "spheres": len(exact.spheres)}
+    embreex = embreex_run(mesh)
+    warm = Beam(np.asarray(wi, np.float64), np.uint64(0), 1000, 0)  # compile (or load) every kernel first
+    replay(wavefront_trace(mesh, sensor, embreex, warm)[2].batches, embreex)
+    _, _, logger = fused_trace(exact, sensor, warm, 1, log_rays=1)
+    logger.embree.intersect(logger.ray_log[:, :3], logger.ray_log[:, 3:6], logger.ray_log[:, 6])
+    best = {}
     for k in range(repeats):
-        tracer.embree = recorder = RecordingScene(embree_scene)
-        start = time.perf_counter()
-        tally = tracer.trace(wi, paths, stream_key(cfg.run.seed, 0, k), 0)
-        elapsed = time.perf_counter() - start
-        best_trace = min(best_trace, elapsed)
-        best_outside = min(best_outside, elapsed - recorder.seconds)
-        segments = int(tally.counts[SEGMENTS])
-        start = time.perf_counter()
-        for origins, directions, dists in recorder.batches:
-            embree_scene.run(origins, directions, dists=dists, output=1)
-        best_raw = min(best_raw, time.perf_counter() - start)
-    return segments / best_trace, segments / best_raw, best_outside / segments, segments, scene.n_triangles
+        b = Beam(np.asarray(wi, np.float64), np.uint64(stream_key(cfg.run.seed, 0, k)), paths, 0)
+        seconds, tally, recorder = wavefront_trace(mesh, sensor, embreex, b)
+        old_segments = int(tally.counts[SEGMENTS])
+        best["old"] = min(best.get("old", np.inf), seconds)
+        best["old_outside"] = min(best.get("old_outside", np.inf), seconds - recorder.seconds)
+        best["raw_embreex"] = min(best.get("raw_embreex", np.inf), replay(recorder.batches, embreex))
+        for threads in (1, 2):
+            seconds, fused_tally, _ = fused_trace(exact, sensor, b, threads)
+            best[f"new_{threads}"] = min(best.get(f"new_{threads}", np.inf), seconds)
+        new_segments = int(fused_tally.counts[SEGMENTS])
+        _, _, logger = fused_trace(exact, sensor, b, 1, log_rays=new_segments)
+        log = logger.ray_log
+        best["raw_direct"] = min(best.get("raw_direct", np.inf),
+                                 replay([(log[:, :3], log[:, 3:6], log[:, 6])], logger.embree.intersect))
+    out.update({
+        "old_segments": old_segments, "new_segments": new_segments,
+        "raw_embreex_rays_per_s": old_segments / best["raw_embreex"],
+        "old_segments_per_s": old_segments / best["old"], "old_paths_per_s": paths / best["old"],
+        "old_ratio": best["raw_embreex"] / best["old"],
+        "old_outside_embree_ns_per_segment": best["old_outside"] / old_segments * 1e9,
+        "raw_direct_rays_per_s": new_segments / best["raw_direct"],
+    })
+    for threads in (1, 2):
+        out[f"new_segments_per_s_{threads}_threads"] = new_segments / best[f"new_{threads}"]
+        out[f"new_paths_per_s_{threads}_threads"] = paths / best[f"new_{threads}"]
+    out["direct_ratio_per_thread"] = out["new_segments_per_s_1_threads"] / out["raw_direct_rays_per_s"]
+    return out
 
 
-def worker_speedup(cfg, repeats: int = 3):
-    """Best wall time of whole runs with 2 and 1 workers, alternated so both see the same machine."""
-    timings = {1: np.inf, 2: np.inf}
+def measure_runs(cfg, run_paths: int, repeats: int) -> dict:
+    """Figure 3: best paths/s of whole runs, alternating the four ways of running."""
+    old_cfg, _, _ = realization(cfg, mesh_error=FORMER_MESH_ERROR)
+    old_cfg = old_cfg.model_copy(update={"run": old_cfg.run.model_copy(update={"backend": "embreex"})})
+    ways = {"old_1_worker": (old_cfg, 1, 1), "old_2_workers": (old_cfg, 2, 1),
+            "new_1_thread": (cfg, 1, 1), "new_2_threads": (cfg, 1, 2)}
+    best = dict.fromkeys(ways, np.inf)
     for _ in range(repeats):
-        for workers in (2, 1):
+        for name, (c, workers, threads) in ways.items():
             start = time.perf_counter()
-            runner.run(cfg, workers=workers)
-            timings[workers] = min(timings[workers], time.perf_counter() - start)
-    return timings[1] / timings[2], timings
+            runner.run(c, workers=workers, threads=threads)
+            best[name] = min(best[name], time.perf_counter() - start)
+    paths = cfg.run.paths * len(cfg.illumination.theta_i_deg)
+    return {f"run_paths_per_s_{name}": paths / seconds for name, seconds in best.items()}
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--config", default=str(ROOT / "runs" / "spheres_phi030.toml"))
+    parser.add_argument("--phis", nargs="+", default=["010", "030", "060"], help="runs/spheres_phiXXX.toml")
     parser.add_argument("--paths", type=int, default=200_000, help="paths of the traced batch")
-    parser.add_argument("--run-paths", type=int, default=400_000, help="paths per incidence of the worker runs")
+    parser.add_argument("--run-paths", type=int, default=400_000, help="paths per incidence of the whole runs")
+    parser.add_argument("--repeats", type=int, default=5, help="best of this many, for every figure")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
-    cfg = config_module.load(args.config)
-    run_cfg = config_module.load(args.config, {"run.paths": args.run_paths, "run.realizations": 8})
-    speedup, timings = worker_speedup(run_cfg)
-    segments_per_s, raw_per_s, outside, segments, triangles = tracer_vs_embree(cfg, args.paths)
-    result = {
-        "segments_per_s": segments_per_s,
-        "raw_rays_per_s": raw_per_s,
-        "ratio": segments_per_s / raw_per_s,
-        "speedup_2_workers": speedup,
-        "outside_embree_ns_per_segment": outside * 1e9,
-    }
-    print(f"scene: {args.config} ({triangles} triangles), {segments} segments traced")
-    print(f"tracer      {segments_per_s / 1e6:8.3f} M segments/s (1 worker)")
-    print(f"raw embreex {raw_per_s / 1e6:8.3f} M rays/s on the same ray batches")
-    print(f"ratio       {result['ratio']:8.3f}")
-    print(f"outside Embree {outside * 1e9:6.1f} ns per segment (numba kernels and Python, best of 3)")
-    print(f"run, 1 worker {timings[1]:.1f} s, 2 workers {timings[2]:.1f} s: speed-up {speedup:.2f}")
+    scenes = {}
+    for phi in args.phis:
+        cfg = config_module.load(ROOT / "runs" / f"spheres_phi{phi}.toml",
+                                 {"run.paths": args.run_paths, "run.realizations": 8})
+        figures = measure_scene(cfg, args.paths, args.repeats)
+        figures.update(measure_runs(cfg, args.run_paths, args.repeats))
+        figures["speedup_2_workers"] = figures["run_paths_per_s_old_2_workers"] / figures["run_paths_per_s_old_1_worker"]
+        figures["speedup_2_threads"] = figures["run_paths_per_s_new_2_threads"] / figures["run_paths_per_s_new_1_thread"]
+        figures["new_2_threads_over_old_2_workers"] = (figures["run_paths_per_s_new_2_threads"]
+                                                       / figures["run_paths_per_s_old_2_workers"])
+        scenes[f"0.{phi[1:]}"] = figures
+        report(f"0.{phi[1:]}", figures)
+    chart(scenes)
     if args.json:
-        print(json.dumps(result))
+        main_scene = scenes.get("0.30") or next(iter(scenes.values()))
+        print(json.dumps({
+            "segments_per_s": main_scene["old_segments_per_s"], "raw_rays_per_s": main_scene["raw_embreex_rays_per_s"],
+            "ratio": main_scene["old_ratio"], "speedup_2_workers": main_scene["speedup_2_workers"],
+            "outside_embree_ns_per_segment": main_scene["old_outside_embree_ns_per_segment"], "scenes": scenes,
+        }))
+
+
+def report(phi: str, f: dict) -> None:
+    print(f"phi = {phi}: {f['spheres']} spheres (exact) / {f['triangles']} triangles (tessellated), "
+          f"{f['new_segments']} / {f['old_segments']} segments")
+    print(f"  raw Embree          embreex {f['raw_embreex_rays_per_s'] / 1e6:6.3f} M rays/s (triangles)   "
+          f"direct {f['raw_direct_rays_per_s'] / 1e6:6.3f} M rays/s (spheres)")
+    print(f"  old backend 1 thr   {f['old_segments_per_s'] / 1e6:6.3f} M segments/s, {f['old_paths_per_s'] / 1e3:7.1f} k paths/s,"
+          f" ratio {f['old_ratio']:.3f}, outside Embree {f['old_outside_embree_ns_per_segment']:.1f} ns/segment")
+    for t in (1, 2):
+        print(f"  new backend {t} thr   {f[f'new_segments_per_s_{t}_threads'] / 1e6:6.3f} M segments/s, "
+              f"{f[f'new_paths_per_s_{t}_threads'] / 1e3:7.1f} k paths/s")
+    print(f"  new, 1 thread / raw direct on the same rays: {f['direct_ratio_per_thread']:.3f}")
+    print(f"  whole runs (k paths/s): old 1 worker {f['run_paths_per_s_old_1_worker'] / 1e3:.1f}, "
+          f"2 workers {f['run_paths_per_s_old_2_workers'] / 1e3:.1f} (x{f['speedup_2_workers']:.2f}); "
+          f"new 1 thread {f['run_paths_per_s_new_1_thread'] / 1e3:.1f}, 2 threads "
+          f"{f['run_paths_per_s_new_2_threads'] / 1e3:.1f} (x{f['speedup_2_threads']:.2f}); "
+          f"new 2 threads / old 2 workers = {f['new_2_threads_over_old_2_workers']:.2f}")
+
+
+def chart(scenes: dict) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    OUT.mkdir(exist_ok=True)
+    phis = list(scenes)
+    x = np.arange(len(phis))
+    fig, (left, right) = plt.subplots(1, 2, figsize=(13, 4.5))
+    bars = [("raw embreex (triangles)", "raw_embreex_rays_per_s"), ("old backend, 1 thread", "old_segments_per_s"),
+            ("raw direct (spheres)", "raw_direct_rays_per_s"), ("new backend, 1 thread", "new_segments_per_s_1_threads"),
+            ("new backend, 2 threads", "new_segments_per_s_2_threads")]
+    for k, (label, key) in enumerate(bars):
+        left.bar(x + (k - 2) * 0.16, [scenes[p][key] / 1e6 for p in phis], 0.16, label=label)
+    left.set_ylabel("M rays or segments / s")
+    left.set_ylim(top=1.3 * max(scenes[p]["new_segments_per_s_2_threads"] for p in phis) / 1e6)
+    left.set_title("segments per second against raw Embree, same rays")
+    runs = [("old, 1 worker", "run_paths_per_s_old_1_worker"), ("old, 2 workers", "run_paths_per_s_old_2_workers"),
+            ("new, 1 thread", "run_paths_per_s_new_1_thread"), ("new, 2 threads", "run_paths_per_s_new_2_threads")]
+    for k, (label, key) in enumerate(runs):
+        right.bar(x + (k - 1.5) * 0.2, [scenes[p][key] / 1e3 for p in phis], 0.2, label=label)
+    right.set_ylabel("k paths / s (whole runs, builds included)")
+    right.set_title("whole runs")
+    for ax in (left, right):
+        ax.set_xticks(x, [f"phi = {p}" for p in phis])
+        ax.legend(fontsize=8, loc="upper left", ncol=2)
+    fig.tight_layout()
+    fig.savefig(OUT / "throughput.png", dpi=110)
+    print(f"chart written to {OUT / 'throughput.png'}")
 
 
 if __name__ == "__main__":
