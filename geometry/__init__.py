@@ -3,7 +3,9 @@
 A generator module provides ``KIND``; ``INTEGRATOR``, the name of the integrator that traces
 its scenes (a key of ``microsim.integrators.INTEGRATORS``; "surface" for Embree triangles);
 ``Config``, the pydantic model of its ``[scene]`` table; ``check(config)``, cross-section rules
-(raises ValueError with a one-line message); ``resolve(config) -> dict``, every scene parameter
+(raises ValueError with a one-line message); ``for_backend(config, backend) -> (config, note)``,
+the config as that Embree backend can trace it (the note says what was substituted, "" if
+nothing); ``resolve(config) -> dict``, every scene parameter
 with its defaults filled in (stored in the table's ``scene/`` attrs); and
 ``generate(resolved, config, rng)``, one random realization in the form its integrator takes
 (for "surface", a ``microsim.scene.Scene`` assembled with ``SceneBuilder``).

@@ -60,6 +60,8 @@ MAX_OPTICAL_DEPTH = 40.0
 TILE_FREE_PATHS = 3.0
 TILE_RANGE = (16.0, 64.0)
 MAX_SUBDIVISIONS = 6
+#: the icosphere budget that stands in for exact spheres on the embreex backend (the former default)
+FALLBACK_MESH_ERROR = 0.01
 #: the slab's top and bottom lie this far (radii) beyond the highest and lowest mesh point
 SLAB_MARGIN = 1e-3
 
@@ -77,9 +79,17 @@ def check(config) -> None:
     scene = config.scene
     if scene.subdivisions is not None and scene.mesh_error is not None:
         raise ValueError("scene.mesh_error: give either subdivisions or mesh_error, not both")
-    if config.run.backend == "embreex" and is_exact(scene):
-        raise ValueError("run.backend = 'embreex' traces triangles only: give scene.subdivisions or "
-                         "scene.mesh_error for tessellated spheres, or use backend 'direct' for exact ones")
+
+
+def for_backend(config, backend: str):
+    """(config, note): the config as ``backend`` can trace it. Exact spheres are Embree's native
+    primitive, which the embreex backend cannot trace: there they become icospheres within
+    FALLBACK_MESH_ERROR, and the note says so."""
+    if backend == "embreex" and is_exact(config.scene):
+        meshed = config.scene.model_copy(update={"mesh_error": FALLBACK_MESH_ERROR})
+        return (config.model_copy(update={"scene": meshed}),
+                f"exact spheres traced as icospheres within mesh_error {FALLBACK_MESH_ERROR} (embreex traces triangles)")
+    return config, ""
 
 
 def is_exact(scene) -> bool:

@@ -12,14 +12,13 @@ import sys
 from pathlib import Path
 
 import click
-import numba
 
 from . import config as config_module
 from .compare import ORDER_ROWS
 
 EXIT_BAD_INPUT = 2
-#: threads a process may run: numba's pool size (the machine's cores unless NUMBA_NUM_THREADS says)
-MAX_THREADS = numba.config.NUMBA_NUM_THREADS
+#: threads a process may run (Python threads, each tracing in a numba call without the GIL)
+MAX_THREADS = 256
 
 
 class BadInput(click.ClickException):
@@ -46,7 +45,7 @@ def cli():
 @click.option("--force", is_flag=True, help="overwrite an existing table")
 def run(config_path, out, workers, threads, backend, paths, seed, force):
     """Trace CONFIG.toml and write its HDF5 table."""
-    from . import runner, tables
+    from . import embree, runner, tables
 
     overrides = {}
     if paths is not None:
@@ -62,19 +61,24 @@ def run(config_path, out, workers, threads, backend, paths, seed, force):
     out = out if out is not None else Path(f"{config.name or config_path.stem}.h5")
     _check_writable(out, force)
     try:
-        plan = runner.Plan.from_config(config, threads)
+        plan = runner.Plan.from_config(config, threads, workers)
     except runner.PlanError as err:
         raise BadInput(str(err)) from None
     total = plan.paths * plan.n_incidences
     with _progress(total) as advance:
-        result = runner.run(config, workers=workers, threads=threads, progress=advance)
+        try:
+            result = runner.run(config, workers=workers, threads=threads, progress=advance)
+        except embree.EmbreeUnavailable as err:  # a worker's own check of the binding failed
+            raise click.ClickException(str(err)) from None
     tables.write(out, result, config)
     albedo = ", ".join(
         f"{math.degrees(t):g}deg {a.mean[-1]:.4f}+-{a.stderr[-1]:.4f}" for t, a in zip(plan.theta_i, result.albedo)
     )
     rate = total / result.wall_time
-    click.echo(f"albedo {albedo} | {result.wall_time:.1f} s, {rate:.3g} paths/s, {workers} worker(s) x {threads} "
-               f"thread(s), backend {plan.backend}")
+    click.echo(f"albedo {albedo} | {result.wall_time:.1f} s, {rate:.3g} paths/s, {workers} worker(s) x "
+               f"{plan.threads} thread(s), backend {plan.backend}")
+    if plan.backend_note:
+        click.echo(f"note: {plan.backend_note}")
     click.echo(f"table written to {out}")
 
 

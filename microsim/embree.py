@@ -10,10 +10,10 @@ runs without the GIL, so threads share one committed scene.
 
 Ray and hit live in an ``RTCRayHit`` record (:data:`RAYHIT`, Embree 4.4 with instance arrays:
 ray 48 bytes, hit 48 bytes, 16-byte aligned). Handles and addresses are passed as integers,
-which the x86-64 and AArch64 calling conventions pass like pointers. The layout is checked when
-the binding loads (:func:`load`) by tracing known rays at a known triangle and sphere; if the
-library is missing or the check fails, :func:`load` raises :class:`EmbreeUnavailable` with one
-line saying why, and the runner falls back to embreex's own wavefront calls.
+which the x86-64 and AArch64 calling conventions pass like pointers. The layout is checked in
+each process before its first scene (:func:`load`) by tracing known rays at a known triangle and
+sphere; if the library is missing or fails the check, :class:`EmbreeUnavailable` says why in one
+line, and the runner falls back to embreex's own wavefront calls.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from __future__ import annotations
 import ctypes
 import functools
 import importlib.util
+import os
 from collections import namedtuple
 from pathlib import Path
 
@@ -32,10 +33,14 @@ from numba import types
 GEOMETRY_TRIANGLE, GEOMETRY_SPHERE_POINT = 0, 50
 BUFFER_INDEX, BUFFER_VERTEX = 0, 1
 FORMAT_UINT3, FORMAT_FLOAT3, FORMAT_FLOAT4 = 0x5003, 0x9003, 0x9004
-#: RTCSceneFlags: watertight triangle tests, as embreex builds its scenes (the two backends then
-#: find the same hits, to the bit); without it 13 % of hit distances on a sphere mesh differ
+#: RTCSceneFlags: no optimization that reduces arithmetic accuracy, as embreex builds its scenes
+#: (the two backends then find the same hits, to the bit); without it 13 % of hit distances on
+#: a sphere mesh differ
 SCENE_FLAG_ROBUST = 1 << 2
+#: RTCDeviceProperty values (rtcore_device.h)
+DEVICE_BACKFACE_CULLING, DEVICE_POINT_GEOMETRY = 65, 101
 INVALID_ID = 0xFFFFFFFF
+MASK_ALL = 0xFFFFFFFF
 ALIGNMENT = 16
 RAYHIT_BYTES = 96
 
@@ -73,7 +78,12 @@ def library_path() -> Path:
 
 
 class _Library:
-    """The ctypes functions that build scenes, and the process's one device."""
+    """The ctypes functions that build scenes; one device per process, made on first use.
+
+    Loading the library starts no thread. A device does not either, but the first commit starts
+    Embree's TBB workers, which a forked process does not get back: the runner forks its workers
+    before anything here is committed (:func:`available` checks the library without a device).
+    """
 
     def __init__(self, path: Path):
         from llvmlite import binding
@@ -93,63 +103,91 @@ class _Library:
             function.restype, function.argtypes = restype, argtypes
             setattr(self, name, function)
         self.path = path
-        self.device = self.rtcNewDevice(None)
-        if not self.device:
-            raise EmbreeUnavailable(f"rtcNewDevice failed in {path.name}")
-        self.version = self.rtcGetDeviceProperty(self.device, 0)  # RTC_DEVICE_PROPERTY_VERSION
+        self._devices = {}  # process id -> device
 
-    def check(self, what: str) -> None:
+    @property
+    def device(self):
+        pid = os.getpid()
+        if pid not in self._devices:
+            device = self.rtcNewDevice(None)
+            if not device:
+                raise EmbreeUnavailable(f"rtcNewDevice failed in {self.path.name}")
+            self._devices[pid] = device
+        return self._devices[pid]
+
+    def property(self, which: int) -> int:
+        return self.rtcGetDeviceProperty(self.device, which)
+
+    def check(self, result, what: str):
+        """``result`` of a call, after making sure Embree reported no error and returned no NULL."""
         code = self.rtcGetDeviceError(self.device)
-        if code:
+        if code or result is None or result == 0:
             raise RuntimeError(f"Embree error {code} while {what}")
+        return result
 
 
 class Scene:
     """A committed Embree scene of a triangle mesh and/or native spheres, owned by this object.
 
     Primitives are numbered across geometries: triangles first (0 .. F-1), then spheres
-    (F .. F+K-1); ``prim_offset[geomID]`` turns Embree's (geomID, primID) into that number.
+    (F .. F+K-1); ``prim_offset[geomID]`` turns Embree's (geomID, primID) into that number. A
+    scene of triangles alone is built robust, as embreex builds its scenes, so that the two
+    backends find the same hits (see SCENE_FLAG_ROBUST); with spheres it is not (4-9 % faster,
+    the same sphere hits).
     """
+
+    handle = 0
 
     def __init__(self, vertices=None, faces=None, spheres=None, lib=None):
         lib = load() if lib is None else lib
         self._lib = lib
-        self.handle = lib.rtcNewScene(lib.device)
-        lib.rtcSetSceneFlags(self.handle, SCENE_FLAG_ROBUST)
-        offsets, count = [], 0
+        self.handle = lib.check(lib.rtcNewScene(lib.device), "creating a scene")
+        has_spheres = spheres is not None and len(spheres) > 0
+        if not has_spheres:
+            lib.rtcSetSceneFlags(self.handle, SCENE_FLAG_ROBUST)
+        offsets, count = {}, 0
         if faces is not None and len(faces):
-            self._attach(GEOMETRY_TRIANGLE, [(BUFFER_VERTEX, FORMAT_FLOAT3, np.asarray(vertices, np.float32)),
-                                             (BUFFER_INDEX, FORMAT_UINT3, np.asarray(faces, np.uint32))])
-            offsets.append(count)
-            count += len(faces)
-        if spheres is not None and len(spheres):
-            self._attach(GEOMETRY_SPHERE_POINT, [(BUFFER_VERTEX, FORMAT_FLOAT4, np.asarray(spheres, np.float32))])
-            offsets.append(count)
-            count += len(spheres)
+            geometry = self._attach(GEOMETRY_TRIANGLE, [(BUFFER_VERTEX, FORMAT_FLOAT3, np.asarray(vertices, np.float32)),
+                                                        (BUFFER_INDEX, FORMAT_UINT3, np.asarray(faces, np.uint32))])
+            offsets[geometry], count = count, count + len(faces)
+        if has_spheres:
+            geometry = self._attach(GEOMETRY_SPHERE_POINT, [(BUFFER_VERTEX, FORMAT_FLOAT4, np.asarray(spheres, np.float32))])
+            offsets[geometry], count = count, count + len(spheres)
         lib.rtcCommitScene(self.handle)
-        lib.check("committing the scene")
-        self.prim_offset = np.array(offsets or [0], dtype=np.int64)
+        lib.check(self.handle, "committing the scene")
+        self.prim_offset = np.zeros(max(offsets, default=0) + 1, dtype=np.int64)  # by the ids Embree gave
+        for geometry, offset in offsets.items():
+            self.prim_offset[geometry] = offset
         self.n_prims = count
 
-    def _attach(self, geometry_type: int, buffers) -> None:
+    def _attach(self, geometry_type: int, buffers) -> int:
+        """Attach one geometry of ``buffers`` (type, format, data); its geometry id."""
         lib = self._lib
-        geometry = lib.rtcNewGeometry(lib.device, geometry_type)
+        geometry = lib.check(lib.rtcNewGeometry(lib.device, geometry_type), "creating a geometry")
         for buffer_type, fmt, data in buffers:
             data = np.ascontiguousarray(data)
             address = lib.rtcSetNewGeometryBuffer(geometry, buffer_type, 0, fmt, data.strides[0], len(data))
-            ctypes.memmove(address, data.ctypes.data, data.nbytes)
+            ctypes.memmove(lib.check(address, f"allocating a buffer of {len(data)} items"), data.ctypes.data,
+                           data.nbytes)
         lib.rtcCommitGeometry(geometry)
-        lib.rtcAttachGeometry(self.handle, geometry)
+        geometry_id = lib.rtcAttachGeometry(self.handle, geometry)
         lib.rtcReleaseGeometry(geometry)
-        lib.check("building a geometry")
+        lib.check(self.handle, "building a geometry")
+        return geometry_id
 
     def arrays(self) -> SceneHandle:
         return SceneHandle(self.handle, self.prim_offset)
 
     def close(self) -> None:
+        """Release the scene; no kernel may be tracing it (the backends own theirs until done)."""
         if self.handle:
             self._lib.rtcReleaseScene(self.handle)
             self.handle = 0
+
+    def _open_handle(self) -> int:
+        if not self.handle:
+            raise ValueError("this Embree scene is closed")
+        return self.handle
 
     def __del__(self):
         self.close()
@@ -161,7 +199,7 @@ class Scene:
         tfar = np.ascontiguousarray(tfar, np.float32)
         n = len(origins)
         prim, t, normal = np.empty(n, np.int64), np.empty(n, np.float32), np.empty((n, 3), np.float32)
-        _intersect_all(self.handle, self.prim_offset, origins, directions, tfar, ray_hits(1), prim, t, normal)
+        _intersect_all(self._open_handle(), self.prim_offset, origins, directions, tfar, ray_hits(1), prim, t, normal)
         return prim, t, normal
 
     def occluded(self, origins, directions, tfar) -> np.ndarray:
@@ -170,7 +208,7 @@ class Scene:
         directions = np.ascontiguousarray(directions, np.float32)
         tfar = np.ascontiguousarray(tfar, np.float32)
         blocked = np.empty(len(origins), np.bool_)
-        _occluded_all(self.handle, origins, directions, tfar, ray_hits(1), blocked)
+        _occluded_all(self._open_handle(), origins, directions, tfar, ray_hits(1), blocked)
         return blocked
 
 
@@ -180,7 +218,7 @@ def ray_hits(n: int) -> np.ndarray:
     raw = np.zeros(n * RAYHIT.itemsize + ALIGNMENT, np.uint8)
     start = -raw.ctypes.data % ALIGNMENT
     records = raw[start:start + n * RAYHIT.itemsize].view(RAYHIT)
-    records["mask"] = INVALID_ID
+    records["mask"] = MASK_ALL
     return records
 
 
@@ -249,27 +287,51 @@ def is_occluded(handle, records, k):
 def _open() -> _Library:
     try:
         return _Library(library_path())
-    except OSError as err:
-        raise EmbreeUnavailable(f"cannot load the Embree library: {err}") from None
+    except (OSError, AttributeError, RuntimeError) as err:
+        message = " ".join(str(err).split())
+        raise EmbreeUnavailable(f"cannot load the Embree library: {message}") from None
 
 
-@functools.lru_cache(maxsize=None)
+def available() -> _Library:
+    """The library, loaded and its functions found, without a device or a thread (raises
+    EmbreeUnavailable): what a process that forks workers may check."""
+    return _open()
+
+
+_checked = set()  # process ids whose library passed the layout check
+
+
 def load() -> _Library:
-    """The library, loaded once per process and checked (raises EmbreeUnavailable)."""
+    """The library, checked in this process (raises EmbreeUnavailable): see :func:`_check_layout`."""
     lib = _open()
-    _check_layout(lib)
+    if os.getpid() not in _checked:
+        try:
+            _check_layout(lib)
+        except RuntimeError as err:
+            raise EmbreeUnavailable(f"the Embree library fails its check: {err}") from None
+        _checked.add(os.getpid())
     return lib
 
 
 def _check_layout(lib: _Library) -> None:
-    """Trace known rays at a known triangle and sphere; refuse the binding if any field is off."""
+    """Refuse the binding unless the library and RTCRayHit are as this module assumes.
+
+    The device must trace points and not cull back faces (a ray inside a solid must see the face
+    it leaves by); known rays at a known triangle and sphere must come back with the right
+    primitive, distance and normal, from outside and from behind.
+    """
+    if lib.property(DEVICE_BACKFACE_CULLING) != 0 or lib.property(DEVICE_POINT_GEOMETRY) != 1:
+        raise EmbreeUnavailable(f"{lib.path.name} culls back faces or has no point geometry")
     scene = Scene(vertices=[[0, 0, 0], [1, 0, 0], [0, 1, 0]], faces=[[0, 1, 2]], spheres=[[5.0, 0.0, 0.0, 1.0]],
                   lib=lib)
-    prim, t, normal = scene.intersect([[0.25, 0.25, 2.0], [5.0, 0.0, 3.0], [9.0, 9.0, 9.0]],
-                                      [[0, 0, -1], [0, 0, -1], [0, 0, 1]], [10.0, 10.0, 10.0])
-    expected = ([0, 1, -1], [2.0, 2.0, 10.0])
+    prim, t, normal = scene.intersect([[0.25, 0.25, 2.0], [5.0, 0.0, 3.0], [9.0, 9.0, 9.0], [0.25, 0.25, -2.0],
+                                       [5.0, 0.0, 0.0]],
+                                      [[0, 0, -1], [0, 0, -1], [0, 0, 1], [0, 0, 1], [0, 0, 1]],
+                                      [10.0, 10.0, 10.0, 10.0, 10.0])
+    scene.close()
+    expected = ([0, 1, -1, 0, 1], [2.0, 2.0, 10.0, 2.0, 1.0])
     if prim.tolist() != expected[0] or not np.allclose(t, expected[1], rtol=1e-6):
         raise EmbreeUnavailable(f"RTCRayHit layout check failed: primitives {prim.tolist()}, distances {t.tolist()}")
-    if normal[0, 2] <= 0 or normal[1, 2] <= 0 or abs(normal[0, 0]) + abs(normal[1, 0]) > 1e-6:
-        raise EmbreeUnavailable(f"RTCRayHit layout check failed: normals {normal[:2].tolist()}")
-    scene.close()
+    if normal[0, 2] <= 0 or normal[1, 2] <= 0 or normal[3, 2] <= 0 or normal[4, 2] <= 0 \
+            or abs(normal[0, 0]) + abs(normal[1, 0]) > 1e-6:
+        raise EmbreeUnavailable(f"RTCRayHit layout check failed: normals {normal.tolist()}")

@@ -48,18 +48,23 @@ class Plan:
     threads: int = 1
 
     @classmethod
-    def from_config(cls, config, threads: int = 1) -> "Plan":
-        """The plan of a validated config; raises PlanError (one line) if it cannot be traced here."""
+    def from_config(cls, config, threads: int = 1, workers: int = 1) -> "Plan":
+        """The plan of a validated config on ``workers`` processes of ``threads`` threads; raises
+        PlanError (one line) if it cannot be traced here. The backend, and the scene as that
+        backend can trace it, are resolved here, and every substitution is said in backend_note."""
         run = config.run
         theta = np.radians(np.asarray(config.illumination.theta_i_deg, dtype=np.float64))
         phi = np.full_like(theta, math.radians(config.illumination.phi_i_deg))
-        scene = geometry.SCENES[config.scene.kind].resolve(config)
-        backend, note = resolve_backend(run.backend)
-        if backend == "embreex" and scene.get("sphere_model") == "exact":
-            raise PlanError(f"exact spheres need the direct Embree backend, which cannot load here ({note}); "
-                            "give scene.subdivisions or scene.mesh_error for tessellated spheres")
-        return cls(config, scene, theta, phi, config.sensor.cells, run.realizations,
-                   math.ceil(run.paths / run.realizations), backend, note, threads)
+        backend, notes = resolve_backend(run.backend, check=workers == 1)
+        if backend == "embreex" and threads > 1:
+            if run.backend == "embreex":
+                raise PlanError(f"--threads {threads}: the embreex backend traces on one thread; use --workers")
+            threads, notes = 1, notes + ["one thread (the embreex backend has no threads)"]
+        generator = geometry.SCENES[config.scene.kind]
+        config, substitution = generator.for_backend(config, backend)
+        notes += [substitution] if substitution else []
+        return cls(config, generator.resolve(config), theta, phi, config.sensor.cells, run.realizations,
+                   math.ceil(run.paths / run.realizations), backend, "; ".join(notes), threads)
 
     @property
     def n_incidences(self) -> int:
@@ -97,17 +102,21 @@ class PlanError(ValueError):
     """A config that cannot be traced on this machine: the message is one line."""
 
 
-def resolve_backend(requested: str) -> tuple[str, str]:
-    """(backend, why "auto" fell back): "direct" where the Embree binding loads, else "embreex"."""
+def resolve_backend(requested: str, check: bool = True) -> tuple[str, list[str]]:
+    """(backend, [why "auto" fell back]): "direct" where the Embree binding loads, else "embreex".
+
+    ``check`` = False (a process about to fork workers) only loads the library: its layout
+    check commits a scene, which starts Embree's threads; each worker then checks for itself.
+    """
     if requested == "embreex":
-        return "embreex", ""
+        return "embreex", []
     try:
-        embree.load()
+        embree.load() if check else embree.available()
     except embree.EmbreeUnavailable as err:
         if requested == "direct":
             raise PlanError(f"run.backend = 'direct': {err}") from None
-        return "embreex", str(err)
-    return "direct", ""
+        return "embreex", [f"the direct backend is unavailable ({err})"]
+    return "direct", []
 
 
 @dataclass
@@ -236,7 +245,7 @@ def split(units: list, parts: int) -> list[list]:
 def run(config, workers: int = 1, threads: int = 1, progress=None) -> Result:
     """Trace a validated config on ``workers`` processes of ``threads`` threads each;
     ``progress(paths_done)`` is called as units complete. Raises PlanError (one line)."""
-    plan = Plan.from_config(config, threads)
+    plan = Plan.from_config(config, threads, workers)
     sensor = Sensor.build(plan.sensor_cells)
     reducer = _Reducer(plan, sensor)
     start = time.perf_counter()

@@ -1,4 +1,4 @@
-"""What a generator hands the surface tracer: triangles for Embree plus the analytic data behind them.
+"""What a generator hands the surface tracer: triangles and spheres for Embree, and the analytic data behind them.
 
 The scene is periodic in x and y over the tile [0, L)^2 (shapes crossing the tile edge come
 with their periodic images) and bounded in z: nothing can be hit above ``z_top``; a ray going

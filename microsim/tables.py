@@ -3,7 +3,7 @@
 Layout (required by CONVENTIONS 6, plus extras marked +):
 
     attrs: microsim_version, config_toml, created_utc, seed, wall_time_s, name,
-           + realizations, paths_per_realization, max_order
+           + realizations, paths_per_realization, max_order, backend, backend_fallback
     incidence/theta, incidence/phi                     (n_i,) radians
     sensor/theta_lo, theta_hi, phi_lo, phi_hi          (n_c,) radians
     sensor/direction (n_c, 3), sensor/solid_angle, sensor/projected_solid_angle (n_c,)

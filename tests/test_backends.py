@@ -9,7 +9,7 @@ are added (a few ulp). Its tables must not depend on the number of threads.
 import numpy as np
 import pytest
 
-from microsim import config, embree, runner
+from microsim import config, embree, runner, tables
 from microsim.cli import main
 from microsim.integrators import fused
 
@@ -36,31 +36,63 @@ def test_direct_backend_traces_the_same_paths_as_embreex_on_triangles():
 def test_tables_are_bit_identical_for_any_thread_count():
     paths = 2 * fused.WAVE_CHUNKS * fused.CHUNK_PATHS + 3 * fused.CHUNK_PATHS + 17  # 3 waves, a partial chunk
     cfg = config.validate(spheres("direct", paths=2 * paths))
-    one, two = runner.run(cfg, threads=1), runner.run(cfg, threads=2)
-    assert np.array_equal(one.counts, two.counts)
-    for a, b in zip(one.brdf + one.albedo + one.energy, two.brdf + two.albedo + two.energy):
-        assert a.total.tobytes() == b.total.tobytes() and a.squares.tobytes() == b.squares.tobytes()
+    one = runner.run(cfg, threads=1)
+    for threads in (2, 3):  # 3: shares of a wave that differ in size
+        other = runner.run(cfg, threads=threads)
+        assert np.array_equal(one.counts, other.counts)
+        for a, b in zip(one.brdf + one.albedo + one.energy, other.brdf + other.albedo + other.energy):
+            assert a.total.tobytes() == b.total.tobytes() and a.squares.tobytes() == b.squares.tobytes()
+
+
+def unavailable(*args):
+    raise embree.EmbreeUnavailable("no library here")
 
 
 def test_auto_falls_back_to_embreex_when_the_binding_cannot_load(monkeypatch):
-    def unavailable():
-        raise embree.EmbreeUnavailable("no library here")
-
     monkeypatch.setattr(embree, "load", unavailable)
-    plan = runner.Plan.from_config(config.validate(spheres("auto", subdivisions=1)))
-    assert plan.backend == "embreex" and plan.backend_note == "no library here"
+    monkeypatch.setattr(embree, "available", unavailable)
+    plan = runner.Plan.from_config(config.validate(spheres("auto", subdivisions=1)), threads=2)
+    assert plan.backend == "embreex" and plan.threads == 1
+    assert plan.backend_note == ("the direct backend is unavailable (no library here); "
+                                 "one thread (the embreex backend has no threads)")
+    exact = runner.Plan.from_config(config.validate(spheres("auto")), workers=2)
+    assert exact.scene["sphere_model"] == "icosphere" and exact.scene["max_mesh_error"] <= 0.01
+    assert "exact spheres traced as icospheres within mesh_error 0.01" in exact.backend_note
     with pytest.raises(runner.PlanError, match="^run.backend = 'direct': no library here$"):
         runner.Plan.from_config(config.validate(spheres("direct", subdivisions=1)))
-    with pytest.raises(runner.PlanError, match="exact spheres need the direct Embree backend"):
-        runner.Plan.from_config(config.validate(spheres("auto")))
 
 
-def test_exact_spheres_on_the_embreex_backend_are_refused_in_one_line(tmp_path, capsys):
-    with pytest.raises(config.ConfigError, match="^run.backend = 'embreex' traces triangles only"):
-        config.validate(spheres("embreex"))
+def test_a_fallback_run_says_why_in_the_table_and_on_the_terminal(monkeypatch, tmp_path, capsys):
+    monkeypatch.setattr(embree, "load", unavailable)
+    monkeypatch.setattr(embree, "available", unavailable)
     path = tmp_path / "c.toml"
-    path.write_text('[scene]\nkind = "poisson_spheres"\nvolume_fraction = 0.3\n[material]\nkind = "absorber"\n'
+    path.write_text('[scene]\nkind = "poisson_spheres"\nvolume_fraction = 0.3\ntile = 8.0\ndepth = 3.0\n'
+                    '[material]\nkind = "lambert"\nalbedo = 0.5\n[illumination]\ntheta_i_deg = 0.0\n'
+                    '[run]\npaths = 400\nrealizations = 2\n')
+    out = tmp_path / "t.h5"
+    assert main(["run", str(path), "--out", str(out)]) == 0
+    assert "note: the direct backend is unavailable (no library here); exact spheres" in capsys.readouterr().out
+    table = tables.load(out)
+    assert table.attrs["backend"] == "embreex" and "no library here" in table.attrs["backend_fallback"]
+    assert table.scene["sphere_model"] == "icosphere"
+
+
+def test_threads_on_the_embreex_backend_are_refused_in_one_line(tmp_path, capsys):
+    path = tmp_path / "c.toml"
+    path.write_text('[scene]\nkind = "plane"\n[material]\nkind = "absorber"\n'
                     '[illumination]\ntheta_i_deg = 0.0\n[run]\npaths = 100\n')
-    assert main(["run", str(path), "--backend", "embreex", "--out", str(tmp_path / "t.h5")]) == 2
+    assert main(["run", str(path), "--backend", "embreex", "--threads", "2", "--out", str(tmp_path / "t.h5")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "scene.subdivisions" in err[0] and not (tmp_path / "t.h5").exists()
+    assert len(err) == 1 and "--threads 2: the embreex backend traces on one thread" in err[0]
+    assert not (tmp_path / "t.h5").exists()
+
+
+def test_a_library_without_embree_symbols_is_unavailable_not_a_traceback(monkeypatch):
+    tbb = next(embree.library_path().parent.glob("libtbb*.so*"))
+    monkeypatch.setattr(embree, "library_path", lambda: tbb)
+    embree._open.cache_clear()
+    try:
+        with pytest.raises(embree.EmbreeUnavailable, match="^cannot load the Embree library: .*rtcNewDevice"):
+            embree.available()
+    finally:
+        embree._open.cache_clear()

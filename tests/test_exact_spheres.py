@@ -13,7 +13,7 @@ from microsim import config, runner
 from stat_bounds import chi2_bound
 
 REALIZATIONS = 16
-pytestmark = pytest.mark.slow  # 2 x 3 x 240 000 paths and 16 meshed scenes of 1.3 M triangles
+pytestmark = pytest.mark.slow  # 2 x 3 x 240 000 paths and 16 meshed scenes of ~0.4 M triangles
 
 
 def table(seed: int, **model):

@@ -52,6 +52,16 @@ def workspace(rows: int, n_cells: int, log_rays: int = 0) -> Workspace:
                      np.zeros(1, np.int64))
 
 
+def backend(scene, threads: int):
+    return FusedBackend(scene, threads)
+
+
+def compile_kernels(beam, scene, sensor) -> None:
+    """Compile (or load) :func:`trace_chunks` for these types, tracing nothing: no Embree call."""
+    work = workspace(1, sensor.n_cells)
+    trace_chunks(0, 0, 0, beam, scene.arrays(), embree.SceneHandle(0, np.zeros(1, np.int64)), sensor, work)
+
+
 class FusedBackend:
     """The scene in a committed Embree scene of its own, traced by chunks on ``threads`` threads.
 

@@ -4,9 +4,10 @@ As pbrt-v4's wavefront work items and MCDC's records do, each bundle is a namedt
 (numba compiles a field access to a struct member, and can cache the kernels that take them
 because the classes live in this importable module). Kernels take a few bundles and a row
 index instead of dozens of arrays. A new per-path field is one entry of ``PATH_FIELDS``: it is
-allocated with the others and carried along when live paths are compacted
-(:func:`microsim.integrators.events.move_path`); no kernel signature changes. Its starting value
-is set where a path starts (``spawn_paths``), its updates where it changes.
+allocated with the others and, on the embreex backend, carried along when live paths are
+compacted (:func:`microsim.integrators.events.move_path`); no kernel signature changes. Its
+starting value is set where a path starts (``surface.start_path``), its updates where it
+changes.
 """
 
 from __future__ import annotations

@@ -15,9 +15,9 @@ Reference counting: the backends' kernels allocate nothing and are compiled with
 reference-counting runtime (``_nrt=False``), as are the kernels they call without inlining
 (``scatter``, ``surface_point``, ``move_path``; a callee compiled with it would bring its increfs
 along). With it, numba's IR inlining of the event kernels increfs and decrefs every array of
-each bundle passed to them (14 atomic pairs per interaction): the wavefront kernel ran 80 %
-slower (0.27 s against 0.15 s for the 1.75 M segments of 200 000 paths on the phi = 0.3 scene);
-without it, 0.13 s. A kernel of the tracer therefore never allocates.
+each bundle passed to them (14 atomic pairs per interaction): for the 1.75 M segments of
+200 000 paths on the phi = 0.3 scene the wavefront kernel took 0.27 s with it and 0.13 s without
+(0.15 s before the bundles). A kernel of the tracer therefore never allocates.
 
 Self-intersection: a scattered ray starts from the hit projected onto the analytic surface (for
 meshed spheres and ellipsoids: onto the mesh's circumscribed surface, outside the own convex
@@ -68,12 +68,9 @@ class SurfaceTracer:
     """
 
     def __init__(self, scene: Scene, sensor, backend: str = "direct", threads: int = 1):
-        from . import fused, wavefront
-
         self.scene, self.sensor = scene, sensor
         self.arrays = scene.arrays()
-        self.backend = (fused.FusedBackend(scene, threads) if backend == "direct"
-                        else wavefront.WavefrontBackend(scene))
+        self.backend = backend_module(backend).backend(scene, threads)
 
     def trace(self, wi, n_paths: int, key, max_order: int):
         """Trace ``n_paths`` paths arriving along -``wi``; return their :class:`~records.Tally`.
@@ -89,11 +86,23 @@ class SurfaceTracer:
         """Compile (or load from numba's cache) the kernels of ``backend`` in this process.
 
         Called before worker processes are forked, so that they inherit the machine code instead
-        of each loading it again. Every scene has the same array types, so a small one will do.
+        of each loading it again. Every scene has the same array types, so a small one will do;
+        nothing is committed to Embree (its threads would not survive the fork).
         """
         builder = SceneBuilder(1.0)
         builder.add_base_plane(-0.5, Absorber(kind="absorber"))
-        cls(builder.build(1.0, -1.0, {}), sensor, backend, threads).trace(np.array([0.0, 0.0, 1.0]), 1, 0, 0)
+        beam = Beam(np.array([0.0, 0.0, 1.0]), np.uint64(0), 1, 0)
+        backend_module(backend).compile_kernels(beam, builder.build(1.0, -1.0, {}), sensor)
+
+
+def backend_module(name: str):
+    """The module of backend ``name``: ``backend(scene, threads)`` and ``compile_kernels``."""
+    from . import fused, wavefront
+
+    modules = {"direct": fused, "embreex": wavefront}
+    if name not in modules:
+        raise ValueError(f"unknown backend {name!r}; known: {', '.join(modules)}")
+    return modules[name]
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

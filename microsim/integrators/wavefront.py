@@ -19,6 +19,17 @@ from .records import SEGMENTS, allocate_paths, allocate_rays, empty_tally
 from .surface import follow, prepare_segment, start_path
 
 
+def backend(scene, threads: int):
+    if threads != 1:
+        raise ValueError("the embreex backend traces on one thread")
+    return WavefrontBackend(scene)
+
+
+def compile_kernels(beam, scene, sensor) -> None:
+    """Compile (or load) spawn_paths and advance, with no embreex scene (nothing to hit)."""
+    WavefrontBackend(scene, embree=_NoHits()).trace(beam, scene.arrays(), sensor)
+
+
 class WavefrontBackend:
     """The scene's triangles in an embreex scene, traced a segment of every live path at a time."""
 
@@ -51,13 +62,12 @@ def embree_scene(vertices, faces):
     """A committed embreex scene of the triangles (built in the process that traces)."""
     from embreex import mesh_construction, rtcore_scene
 
+    if not len(faces):
+        return _NoHits()
     committed = rtcore_scene.EmbreeScene()
-    if len(faces):
-        mesh_construction.TriangleMesh(committed, vertices, faces)
-        probe = np.zeros((1, 3), np.float32)
-        committed.run(probe, probe + np.float32([0, 0, 1]), dists=np.zeros(1, np.float32))  # commits the BVH
-    else:
-        committed = _NoHits()
+    mesh_construction.TriangleMesh(committed, vertices, faces)
+    probe = np.zeros((1, 3), np.float32)
+    committed.run(probe, probe + np.float32([0, 0, 1]), dists=np.zeros(1, np.float32))  # commits the BVH
     return committed
 
 
