@@ -199,7 +199,7 @@ class Scene:
         tfar = np.ascontiguousarray(tfar, np.float32)
         n = len(origins)
         prim, t, normal = np.empty(n, np.int64), np.empty(n, np.float32), np.empty((n, 3), np.float32)
-        _intersect_all(self._open_handle(), self.prim_offset, origins, directions, tfar, ray_hits(1), prim, t, normal)
+        _intersect_all(self._open_handle(), self.prim_offset, origins, directions, tfar, ray_hits(1), (prim, t, normal))
         return prim, t, normal
 
     def occluded(self, origins, directions, tfar) -> np.ndarray:
@@ -257,7 +257,8 @@ def closest_hit(handle, prim_offset, records, k):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _intersect_all(handle, prim_offset, origins, directions, tfar, records, prim, t, normal):
+def _intersect_all(handle, prim_offset, origins, directions, tfar, records, hits):
+    prim, t, normal = hits
     for i in range(len(origins)):
         set_ray(records[0], (origins[i, 0], origins[i, 1], origins[i, 2]),
                 (directions[i, 0], directions[i, 1], directions[i, 2]), tfar[i])
