@@ -8,7 +8,12 @@ are close to square. Cells of ring k are centred on phi = 2 pi j / n_k (j = 0 si
 backscatter half plane of an incidence at phi_i = 0).
 
 Lookup: u = (1 - z) N lies in [C_{k-1}, C_k) for the ring k of direction (x, y, z), so
-``ring_of[floor(u)]`` gives the ring in O(1), and phi gives the cell within the ring.
+``ring_of[floor(u)]`` gives the ring in O(1). Within the ring, a polynomial azimuth (error
+below 1e-5 rad, far below a cell's width) guesses the cell, and the side of the cell's two phi
+edges that (x, y) lies on (the sign of a cross product with the edge's unit vector) settles it
+exactly: no atan2, which took 8 ns of the 45 ns a segment spends outside Embree in the direct
+backend (about 70 ns per exit, phi = 0.3). It bins as floor(atan2(y, x) n_k / 2 pi + 1/2)
+did, except within rounding (~1e-16 rad) of an edge.
 """
 
 from __future__ import annotations
@@ -25,13 +30,24 @@ from .frames import direction
 class Sensor(NamedTuple):
     """Cell layout of the hemispherical sensor (all angles in radians).
 
-    A namedtuple of its three lookup arrays, so that numba kernels take the sensor itself
-    (:func:`cell_index`).
+    A namedtuple of its lookup arrays, so that numba kernels take the sensor itself
+    (:func:`cell_index`). Made from the cells per ring alone (:meth:`from_ring_counts`).
     """
 
     ring_counts: np.ndarray  # (n_rings,) cells per ring
     ring_start: np.ndarray  # (n_rings + 1,) index of the first cell of each ring; last = N
     ring_of: np.ndarray  # (N,) ring of each solid-angle slot floor((1 - z) N)
+    edge_x: np.ndarray  # (N,) cos of each cell's lower phi edge, (j - 1/2) 2 pi / n_k
+    edge_y: np.ndarray  # (N,) its sin
+
+    @classmethod
+    def from_ring_counts(cls, ring_counts) -> "Sensor":
+        ring_counts = np.asarray(ring_counts, dtype=np.int64)
+        ring_start = np.concatenate([[0], np.cumsum(ring_counts)]).astype(np.int64)
+        ring_of = np.repeat(np.arange(len(ring_counts), dtype=np.int64), ring_counts)
+        j = np.arange(ring_start[-1]) - ring_start[ring_of]
+        edge = (j - 0.5) * (2.0 * np.pi / ring_counts[ring_of])
+        return cls(ring_counts, ring_start, ring_of, np.cos(edge), np.sin(edge))
 
     @classmethod
     def build(cls, cells: int) -> "Sensor":
@@ -48,10 +64,7 @@ class Sensor(NamedTuple):
             for lo, hi in zip(edges[:-1], edges[1:]):
                 band = 2.0 * math.pi * (math.cos(lo) - math.cos(hi))
                 counts.append(max(1, round(band / omega)))
-        ring_counts = np.asarray(counts, dtype=np.int64)
-        ring_start = np.concatenate([[0], np.cumsum(ring_counts)]).astype(np.int64)
-        ring_of = np.repeat(np.arange(len(ring_counts), dtype=np.int64), ring_counts)
-        return cls(ring_counts, ring_start, ring_of)
+        return cls.from_ring_counts(counts)
 
     @property
     def n_cells(self) -> int:
@@ -160,13 +173,38 @@ def cell_index(d, sensor):
         slot = 0
     k = sensor.ring_of[slot]
     count = sensor.ring_counts[k]
-    phi = math.atan2(y, x)
-    j = int(math.floor(phi * count / (2.0 * math.pi) + 0.5))
-    if j < 0:
-        j += count
-    if j >= count:
-        j -= count
-    return sensor.ring_start[k] + j
+    first = sensor.ring_start[k]
+    if count == 1:
+        return first
+    j = int(math.floor(azimuth(x, y) * count / (2.0 * math.pi) + 0.5))
+    j = j % count
+    for _ in range(count):  # one step at most: the guess is within 1e-5 rad
+        if sensor.edge_x[first + j] * y - sensor.edge_y[first + j] * x < 0.0:
+            j = j - 1 if j > 0 else count - 1  # d is clockwise of the cell's lower edge
+            continue
+        upper = j + 1 if j + 1 < count else 0
+        if sensor.edge_x[first + upper] * y - sensor.edge_y[first + upper] * x >= 0.0:
+            j = upper  # d is on or past the upper edge
+            continue
+        break
+    return first + j
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def azimuth(x, y):
+    """atan2(y, x) within 1e-5 rad (a cubic minimax fit of atan on [0, 1], octant folded)."""
+    ax, ay = abs(x), abs(y)
+    big, small = max(ax, ay), min(ax, ay)
+    if big == 0.0:
+        return 0.0
+    a = small / big
+    s = a * a
+    r = ((-0.0464964749 * s + 0.15931422) * s - 0.327622764) * s * a + a
+    if ay > ax:
+        r = 0.5 * math.pi - r
+    if x < 0.0:
+        r = math.pi - r
+    return -r if y < 0.0 else r
 
 
 @numba.njit(cache=True, error_model="numpy")

@@ -159,9 +159,7 @@ def load(path: str | Path) -> Table:
         h5.visititems(lambda name, obj: arrays.__setitem__(name, obj[()]) if isinstance(obj, h5py.Dataset) else None)
         attrs = {k: _plain(v) for k, v in h5.attrs.items()}
         scene = {k: _plain(v) for k, v in h5["scene"].attrs.items()}
-    ring_counts = arrays["sensor/ring_counts"].astype(np.int64)
-    ring_start = np.concatenate([[0], np.cumsum(ring_counts)])
-    sensor = Sensor(ring_counts, ring_start, np.repeat(np.arange(len(ring_counts)), ring_counts))
+    sensor = Sensor.from_ring_counts(arrays["sensor/ring_counts"])
     return Table(
         path, attrs, scene, arrays["incidence/theta"], arrays["incidence/phi"], sensor,
         arrays["sensor/direction"], arrays["sensor/projected_solid_angle"], arrays["brdf"], arrays["brdf_stderr"],

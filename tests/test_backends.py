@@ -34,8 +34,8 @@ def test_direct_backend_traces_the_same_paths_as_embreex_on_triangles():
 
 
 def test_tables_are_bit_identical_for_any_thread_count():
-    paths = 2 * fused.WAVE_CHUNKS * fused.CHUNK_PATHS + 3 * fused.CHUNK_PATHS + 17  # 3 waves, a partial chunk
-    cfg = config.validate(spheres("direct", paths=2 * paths))
+    paths = 2 * fused.WAVE_CHUNKS_PER_THREAD * fused.CHUNK_PATHS + 3 * fused.CHUNK_PATHS + 17  # 3 waves of one thread
+    cfg = config.validate(spheres("direct", paths=paths))  # and a partial chunk
     one = runner.run(cfg, threads=1)
     for threads in (2, 3):  # 3: shares of a wave that differ in size
         other = runner.run(cfg, threads=threads)

@@ -71,6 +71,28 @@ def test_lookup_at_the_pole_the_horizon_and_the_seam():
     assert c[2] == c[3]  # phi = +pi and phi -> -pi land in the same cell
 
 
+@pytest.mark.parametrize("cells", [2, 20, 3240, 200_000])
+def test_lookup_bins_as_atan2_does_even_next_to_every_phi_edge(cells):
+    """The lookup guesses with a polynomial azimuth and settles by the edges' cross products: it
+    must bin as floor(atan2(y, x) n_k / 2 pi + 1/2) did, 1e-9 and 1e-12 rad either side of every
+    cell's phi edge, and on random directions."""
+    s = Sensor.build(cells)
+    ring = s.ring_of_cell()
+    j = np.arange(s.n_cells) - s.ring_start[ring]
+    edge = np.concatenate([(j - 0.5) * 2 * np.pi / s.ring_counts[ring] + e for e in (1e-9, -1e-9, 1e-12, -1e-12)])
+    mu = np.tile(1 - (s.ring_start[ring] + 0.5 * s.ring_counts[ring]) / s.n_cells, 4)  # mid-ring heights
+    sin_theta = np.sqrt(1 - mu**2)
+    rng = np.random.default_rng(8)
+    w = rng.normal(size=(200_000, 3))
+    w[:, 2] = np.abs(w[:, 2])
+    w /= np.linalg.norm(w, axis=1)[:, None]
+    w = np.concatenate([np.stack([sin_theta * np.cos(edge), sin_theta * np.sin(edge), mu], axis=1), w])
+    ring_of_w = s.ring_of[np.clip(((1 - w[:, 2]) * s.n_cells).astype(int), 0, s.n_cells - 1)]
+    count = s.ring_counts[ring_of_w]
+    by_atan2 = np.floor(np.arctan2(w[:, 1], w[:, 0]) * count / (2 * np.pi) + 0.5).astype(int) % count
+    assert np.array_equal(s.lookup(w), s.ring_start[ring_of_w] + by_atan2)
+
+
 def test_cell_average_integrates_polynomials_in_mu_exactly():
     s = Sensor.build(500)
     c = s.cos_edges
