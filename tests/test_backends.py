@@ -6,6 +6,9 @@ is the same): every event count equal, and tables equal but for the order in whi
 are added (a few ulp). Its tables must not depend on the number of threads.
 """
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -96,3 +99,12 @@ def test_a_library_without_embree_symbols_is_unavailable_not_a_traceback(monkeyp
             embree.available()
     finally:
         embree._open.cache_clear()
+
+
+def test_kernels_compile_in_a_fresh_process_before_the_library_is_used():
+    """The runner compiles before it forks workers, before any scene: the direct kernel links to
+    rtcIntersect1 by name, so compiling must load the library itself (it segfaulted without)."""
+    code = ("from microsim.integrators.surface import SurfaceTracer; from microsim.sensor import Sensor; "
+            "SurfaceTracer.compile(Sensor.build(20))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]

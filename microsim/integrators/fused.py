@@ -60,7 +60,10 @@ def backend(scene, threads: int):
 
 
 def compile_kernels(beam, scene, sensor) -> None:
-    """Compile (or load) :func:`trace_chunks` for these types, tracing nothing: no Embree call."""
+    """Compile (or load) :func:`trace_chunks` for these types, tracing nothing: no Embree call,
+    no device. The library is loaded first: the kernel's machine code links to rtcIntersect1 by
+    name (without it, loading the code segfaults)."""
+    embree.available()
     work = workspace(1, sensor.n_cells)
     trace_chunks(0, 0, 0, beam, scene.arrays(), embree.SceneHandle(0, np.zeros(1, np.int64)), sensor, work)
 
