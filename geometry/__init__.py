@@ -6,7 +6,9 @@ its scenes (a key of ``microsim.integrators.INTEGRATORS``; "surface" for Embree 
 (raises ValueError with a one-line message); ``for_backend(config, backend) -> (config, note)``,
 the config as that Embree backend can trace it (the note says what was substituted, "" if
 nothing); ``resolve(config) -> dict``, every scene parameter
-with its defaults filled in (stored in the table's ``scene/`` attrs); and
+with its defaults filled in (stored in the table's ``scene/`` attrs); ``scene_bytes(resolved)``,
+about how much memory one realization takes once built for Embree (the runner refuses a run
+that cannot fit); and
 ``generate(resolved, config, rng)``, one random realization in the form its integrator takes
 (for "surface", a ``microsim.scene.Scene`` assembled with ``SceneBuilder``).
 """

@@ -138,6 +138,20 @@ def level_for(mesh_error: float) -> int:
     return MAX_SUBDIVISIONS
 
 
+#: memory per sphere once built: shape rows and Embree's copy and BVH (exact), or per triangle of
+#: an icosphere (vertices, faces, embreex's copy and BVH); 215 B a triangle measured on phi = 0.6
+#: at level 3 (benchmarks/memory.py)
+EXACT_SPHERE_BYTES, TRIANGLE_BYTES = 300, 250
+
+
+def scene_bytes(resolved: dict) -> int:
+    """Expected spheres (with 6 standard deviations of Poisson spread) times their size."""
+    n = resolved["expected_spheres"]
+    spheres = n + 6.0 * math.sqrt(n) + 1.0
+    per_sphere = resolved["triangles_per_sphere"] * TRIANGLE_BYTES or EXACT_SPHERE_BYTES
+    return int(spheres * per_sphere)
+
+
 def resolve(config) -> dict:
     scene = config.scene
     phi = scene.volume_fraction

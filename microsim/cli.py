@@ -1,20 +1,26 @@
 """Command line (CONVENTIONS 7): ``microsim run``, ``microsim compare``, ``microsim models``.
 
 Bad input of any kind (CONVENTIONS 9) ends with one line on stderr naming the key or flag and
-what is accepted, exit status 2, no traceback, and no output file.
+what is accepted, exit status 2, no traceback, and no output file. A run stopped by SIGINT,
+SIGTERM or SIGHUP stops its workers, writes nothing, says so in one line and exits with
+128 + the signal's number (130, 143, 129), as a shell reports a process killed by it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+import signal
 import sys
+import time
 from pathlib import Path
 
 import click
 
 from . import config as config_module
 from .compare import ORDER_ROWS
+from .sensor import Sensor
 
 EXIT_BAD_INPUT = 2
 #: threads a process may run (Python threads, each tracing in a numba call without the GIL)
@@ -23,6 +29,33 @@ MAX_THREADS = 256
 
 class BadInput(click.ClickException):
     exit_code = EXIT_BAD_INPUT
+
+
+#: signals that stop a run cleanly (its workers killed, no table written)
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+class Stopped(click.ClickException):
+    """A run stopped by a signal: exit status 128 + its number."""
+
+    def __init__(self, signum: int):
+        super().__init__(f"stopped by {signal.Signals(signum).name}; no table written")
+        self.exit_code = 128 + signum
+
+
+@contextlib.contextmanager
+def _stop_on_signals():
+    """Within the block, STOP_SIGNALS raise :class:`Stopped` (in the main thread, between bytecodes:
+    the runner's clean-up then kills its workers)."""
+    def stop(signum, frame):
+        raise Stopped(signum)
+
+    previous = {signum: signal.signal(signum, stop) for signum in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -34,7 +67,7 @@ def cli():
 @cli.command()
 @click.argument("config_path", metavar="CONFIG.toml", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--out", "out", type=click.Path(dir_okay=False, path_type=Path),
-              help="table to write [default: <name or config stem>.h5]")
+              help="table to write [default: <config file stem>.h5, in the current directory]")
 @click.option("--workers", type=click.IntRange(1, 256), default=1, show_default=True, help="worker processes")
 @click.option("--threads", type=click.IntRange(1, MAX_THREADS), default=1, show_default=True,
               help="threads per process, sharing one scene (direct backend)")
@@ -58,19 +91,23 @@ def run(config_path, out, workers, threads, backend, paths, seed, force):
         config = config_module.load(config_path, overrides)
     except config_module.ConfigError as err:
         raise BadInput(str(err)) from None
-    out = out if out is not None else Path(f"{config.name or config_path.stem}.h5")
+    out = out if out is not None else Path(f"{config_path.stem}.h5")
     _check_writable(out, force)
     try:
         plan = runner.Plan.from_config(config, threads, workers)
+        runner.check_memory(plan, Sensor.build(plan.sensor_cells), workers)  # before the progress bar
     except runner.PlanError as err:
         raise BadInput(str(err)) from None
     total = plan.paths * plan.n_incidences
-    with _progress(total) as advance:
+    with _stop_on_signals(), _progress(plan) as advance:
         try:
             result = runner.run(config, workers=workers, threads=threads, progress=advance)
         except embree.EmbreeUnavailable as err:  # a worker's own check of the binding failed
             raise click.ClickException(str(err)) from None
-    tables.write(out, result, config)
+        try:
+            tables.write(out, result, config, overwrite=force)
+        except tables.TableExists as err:
+            raise BadInput(f"--out: {err}") from None
     albedo = ", ".join(
         f"{math.degrees(t):g}deg {a.mean[-1]:.4f}+-{a.stderr[-1]:.4f}" for t, a in zip(plan.theta_i, result.albedo)
     )
@@ -112,9 +149,14 @@ def compare(table_path, model_name, params, order, as_json, plot_dir):
         table = tables.load(table_path)
     except FileNotFoundError:
         raise BadInput(f"TABLE.h5: {table_path} not found") from None
-    except (OSError, KeyError) as err:
+    except tables.TableError as err:
+        raise BadInput(f"TABLE.h5: {table_path}: {err}") from None
+    except OSError as err:
         raise BadInput(f"TABLE.h5: {table_path} is not a microsim table ({err})") from None
-    result = compare_module.compare(table, model, order)
+    try:
+        result = compare_module.compare(table, model, order)
+    except ValueError as err:  # NaN or infinity in the model's values (the message names it)
+        raise BadInput(str(err)) from None
     if plot_dir is not None:
         from . import plots
 
@@ -142,14 +184,18 @@ def list_models():
     """List the analytic models, their parameters with accepted values, and their references."""
     from . import models
 
-    for name in models.available():
-        cls = models.get(name)
+    classes = [models.get(name) for name in models.available()]
+    rows = [(p.name, p.describe(), "no default" if p.default is None else f"default {p.default}")
+            for cls in classes for p in cls.params]
+    widths = [max(len(row[k]) for row in rows) for k in range(3)]
+    for name, cls in zip(models.available(), classes):
         click.echo(f"{name}: {cls.reference}")
         if not cls.reciprocal:
             click.echo(f"    (not reciprocal: {cls.nonreciprocal_reason})")
         for p in cls.params:
             default = "no default" if p.default is None else f"default {p.default}"
-            click.echo(f"    {p.name:<14} {p.describe():<30} {default:<16} {p.doc}")
+            cells = (p.name, p.describe(), default)
+            click.echo("    " + "  ".join(f"{c:<{w}}" for c, w in zip(cells, widths)) + f"  {p.doc}")
 
 
 def _check_writable(out: Path, force: bool) -> None:
@@ -163,23 +209,37 @@ def _check_writable(out: Path, force: bool) -> None:
 
 
 class _progress:
-    """A rich progress bar on a terminal; nothing otherwise. Yields ``advance(paths)``."""
+    """A rich progress bar on a terminal, nothing otherwise; yields ``advance(unit, paths)``.
 
-    def __init__(self, total: int):
-        self.total = total
+    It counts units (realization x incidence) and paths per incidence, as ``--paths`` does, and
+    its time left is the mean rate since the start applied to what is left (steadier than a
+    recent-rate estimate when units end in bursts, as they do with workers)."""
+
+    def __init__(self, plan):
+        self.plan = plan
         self.bar = None
 
     def __enter__(self):
         if not sys.stderr.isatty():
-            return lambda n: None
+            return lambda unit, paths: None
         from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+        from rich.progress import BarColumn, Progress, TextColumn
 
-        self.bar = Progress(TextColumn("tracing"), BarColumn(), MofNCompleteColumn(), TextColumn("paths"),
-                            TimeRemainingColumn(), console=Console(stderr=True), transient=True)
+        plan, start = self.plan, time.monotonic()
+        self.bar = Progress(TextColumn("tracing"), BarColumn(), TextColumn("{task.fields[status]}"),
+                            console=Console(stderr=True), transient=True)
         self.bar.start()
-        task = self.bar.add_task("trace", total=self.total)
-        return lambda n: self.bar.advance(task, n)
+        units = len(plan.units)
+        task = self.bar.add_task("trace", total=units, status=f"0/{units} units")
+
+        def advance(unit, paths):
+            self.bar.advance(task, 1)
+            done = int(self.bar.tasks[0].completed)
+            left = (time.monotonic() - start) * (units - done) / done
+            per_incidence = done * plan.paths_per_realization // plan.n_incidences
+            self.bar.update(task, status=f"{done}/{units} units, {per_incidence:,} of {plan.paths:,} paths per "
+                                         f"incidence, {left:.0f} s left")
+        return advance
 
     def __exit__(self, *exc):
         if self.bar is not None:

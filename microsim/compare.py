@@ -9,7 +9,8 @@ reported.
 
 Metrics are taken over the cells with signal, where the table value exceeds
 ``SIGNAL_TO_NOISE`` standard errors (a relative error means nothing on a cell the simulation
-did not resolve).
+did not resolve). NaN or infinity, in the table or in the model, is an error, never a cell
+silently left out.
 """
 
 from __future__ import annotations
@@ -60,7 +61,7 @@ class Comparison:
             out["albedo_model"] = float(np.mean(self.albedo_model))
             out["albedo_sim"] = float(np.mean(self.albedo_sim))
         else:
-            out = {"theta_i_deg": float(np.degrees(self.theta_i[i])), "phi_i_deg": float(np.degrees(self.phi_i[i])),
+            out = {"theta_i_deg": _degrees(self.theta_i[i]), "phi_i_deg": _degrees(self.phi_i[i]),
                    **out, "albedo_model": float(self.albedo_model[i]), "albedo_sim": float(self.albedo_sim[i]),
                    "albedo_sim_stderr": float(self.albedo_sim_stderr[i])}
         return out
@@ -109,11 +110,15 @@ def compare(table, model, order: str = "all") -> Comparison:
     row = ORDER_ROWS[order]
     sim = table.brdf if row is None else table.brdf_order[:, row, :]
     stderr = table.brdf_stderr if row is None else table.arrays["brdf_order_stderr"][:, row, :]
+    names = ("brdf", "brdf_stderr") if row is None else ("brdf_order", "brdf_order_stderr")
+    for name, values in zip(names, (sim, stderr)):
+        _require_finite(values, f"table {table.path}: {name} (order {order})")
     modelled = np.zeros_like(sim)
     worst = 0.0
     for i, wi in enumerate(table.wi):
         modelled[i], change = cell_averages(model, table.sensor, wi, stderr[i])
         worst = max(worst, change)
+    _require_finite(modelled, f"model {model!r}")
     signal = (stderr > 0) & (sim > SIGNAL_TO_NOISE * stderr)
     p = table.projected_solid_angle
     if row is None:
@@ -123,3 +128,14 @@ def compare(table, model, order: str = "all") -> Comparison:
         albedo_se = table.arrays["albedo_order_stderr"][:, row]
     return Comparison(model.name, dict(model.values), order, table.theta_i, table.phi_i, modelled, sim, stderr,
                       signal, modelled @ p, albedo_sim, albedo_se, worst)
+
+
+def _degrees(radians: float) -> float:
+    """Degrees as a config gives them: 30.0, not the 29.999999999999996 of a round trip."""
+    return round(float(np.degrees(radians)), 9)
+
+
+def _require_finite(values: np.ndarray, what: str) -> None:
+    """Raise ValueError naming ``what`` if any cell is NaN or infinite."""
+    if bad := np.count_nonzero(~np.isfinite(values)):
+        raise ValueError(f"{what} is NaN or infinite in {bad} of {values.size} cells")

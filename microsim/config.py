@@ -59,7 +59,8 @@ class Run(Section):
 
 
 class Config(Section):
-    name: str | None = Field(None, max_length=200)
+    name: str | None = Field(None, max_length=200, pattern=r"^[^\x00-\x1f\x7f]*$",
+                             description="a label stored in the table (printable characters); not a file name")
     scene: Scene
     material: AnyMaterial
     base: AnyMaterial | None = None
@@ -72,7 +73,10 @@ def load(path: str | Path, overrides: dict | None = None) -> Config:
     """Read and validate a TOML config; ``overrides`` replace keys as {"run.paths": 1000}."""
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise ConfigError(f"config file {str(path)!r} is not UTF-8 text (byte 0x{err.object[err.start]:02x} at "
+                          f"offset {err.start}); TOML files are UTF-8") from None
     except FileNotFoundError:
         raise ConfigError(f"config file {str(path)!r} not found") from None
     except OSError as err:
@@ -128,6 +132,8 @@ def describe_error(error: dict, data: dict) -> str:
         if given is None:
             return f"{key}.kind: missing; accepted: {tags}"
         return f"{key}.kind = {given!r}: unknown kind; accepted: {tags}"
+    if kind == "string_pattern_mismatch":  # the only pattern: no control characters
+        return f"{key}{shown}: contains a control character; accepted: printable text"
     problem = "out of range" if kind in _RANGE_ERRORS else error["msg"].lower()
     return f"{key}{shown}: {problem}; {_accepted(node, error)}"
 

@@ -18,44 +18,60 @@ def _pyplot():
     return plt
 
 
+#: a ring's cells are drawn with at least this many straight pieces around the circle
+RING_PIECES = 96
+
+
 def _polar_cells(ax, sensor, values, cmap, norm):
-    """Draw every sensor cell as a polar bar: angle = phi, radius = theta in degrees."""
-    t_lo, t_hi, p_lo, p_hi = sensor.cell_bounds()
-    colours = cmap.with_extremes(bad="lightgrey")(norm(np.ma.masked_invalid(values)))
-    ax.bar(0.5 * (p_lo + p_hi), np.degrees(t_hi - t_lo), width=p_hi - p_lo, bottom=np.degrees(t_lo),
-           color=colours, edgecolor="none", align="center")
+    """Draw every sensor cell on polar axes (angle = phi, radius = theta in degrees): one
+    pcolormesh per ring (a few ms each; a bar per cell took 16 s a figure at 3240 cells), each
+    cell cut into enough pieces in phi that its arcs stay round."""
+    edges = np.degrees(sensor.ring_theta_bounds())
+    for k in range(sensor.n_rings):
+        count, first = int(sensor.ring_counts[k]), int(sensor.ring_start[k])
+        pieces = max(1, -(-RING_PIECES // count))
+        phi = (np.arange(count * pieces + 1) / pieces - 0.5) * (2.0 * np.pi / count)
+        row = np.repeat(np.ma.masked_invalid(values[first:first + count]), pieces)[None, :]
+        ax.pcolormesh(phi, edges[:, k], row, cmap=cmap.with_extremes(bad="lightgrey"), norm=norm, shading="flat")
     ax.set_ylim(0, 90)
     ax.set_yticks([30, 60, 90])
     ax.set_yticklabels(["30", "60", "90"], fontsize=7)
+    ax.set_rlabel_position(112.5)
     ax.tick_params(axis="x", labelsize=7)
 
 
 def polar_maps(comparison, sensor, i: int, path: Path) -> None:
-    """Simulation, model and relative error on the hemisphere for incidence ``i``."""
+    """Simulation, model and relative error on the hemisphere for incidence ``i``; colour bars
+    below the maps, so that nothing hides the backscatter mark at the rim."""
     plt = _pyplot()
     from matplotlib import colors
 
     sim, model, ok = comparison.sim[i], comparison.model[i], comparison.signal[i]
     rel = np.where(ok, (model - sim) / np.where(sim > 0, sim, 1.0), np.nan)
     top = np.nanmax(np.concatenate([sim[ok], model[ok]])) if ok.any() else 1.0
-    fig, axes = plt.subplots(1, 3, subplot_kw={"projection": "polar"}, figsize=(13, 4.4))
+    fig, axes = plt.subplots(1, 3, subplot_kw={"projection": "polar"}, figsize=(13, 5.2))
     value_norm = colors.Normalize(0.0, top)
     limit = max(0.05, float(np.nanpercentile(np.abs(rel), 95))) if ok.any() else 0.1
     error_norm = colors.Normalize(-limit, limit)
-    for ax, values, norm, cmap, title in (
-        (axes[0], sim, value_norm, plt.cm.viridis, "simulation f (1/sr)"),
-        (axes[1], model, value_norm, plt.cm.viridis, f"model {comparison.model_name}"),
-        (axes[2], rel, error_norm, plt.cm.RdBu_r, "(model - sim) / sim"),
+    for ax, values, norm, cmap, title, label in (
+        (axes[0], sim, value_norm, plt.cm.viridis, "simulation", "f (1/sr)"),
+        (axes[1], model, value_norm, plt.cm.viridis, f"model {comparison.model_name}", "f (1/sr)"),
+        (axes[2], rel, error_norm, plt.cm.RdBu_r, "(model - sim) / sim",
+         f"scale clipped at +-{limit:.3g} (95th percentile of |error|, at least 0.05)"),
     ):
         _polar_cells(ax, sensor, values, cmap, norm)
-        ax.set_title(title, fontsize=10)
-        fig.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.75)
+        ax.set_title(title, fontsize=10, pad=14)
+        bar = fig.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax, orientation="horizontal",
+                           shrink=0.8, pad=0.1)
+        bar.set_label(label, fontsize=7)
+        bar.ax.tick_params(labelsize=7)
     phi_i = comparison.phi_i[i]
     for ax in axes:
-        ax.plot([phi_i], [np.degrees(comparison.theta_i[i])], marker="*", color="red", ms=10)
-    fig.suptitle(f"theta_i = {np.degrees(comparison.theta_i[i]):.1f} deg (red star: retro direction; "
-                 f"grey cells: no signal)", fontsize=10)
-    fig.tight_layout()
+        ax.plot([phi_i], [np.degrees(comparison.theta_i[i])], marker="*", color="red", ms=11, mec="white",
+                zorder=5, clip_on=False)
+    fig.suptitle(f"theta_i = {np.degrees(comparison.theta_i[i]):.1f} deg; radius: theta_o (deg), angle: phi_o; "
+                 f"red star: backscatter direction; grey cells: no signal", fontsize=10)
+    fig.subplots_adjust(top=0.83, bottom=0.02, left=0.03, right=0.97)
     fig.savefig(path, dpi=100)
     plt.close(fig)
 

@@ -10,15 +10,24 @@ Work is cut into units (realization r, incidence i). The random stream of a unit
 depend on which process traced it. Units are split into contiguous blocks, one per worker (a
 worker builds each realization of its block once), and tallies are summed in unit order
 whatever order they arrive in: the table is bit-identical for any number of workers.
+
+Workers are forked processes that die with the run: each asks Linux for SIGKILL when its parent
+dies (prctl PR_SET_PDEATHSIG, so even a SIGKILL of the main process takes them along), ignores
+SIGINT (a terminal sends it to the whole group; the main process decides), and is killed by the
+main process as soon as the run ends in any other way than success (an exception, a signal
+turned into one by the CLI). Memory is estimated before anything is traced
+(:func:`memory_estimate`) and a run that cannot fit is refused.
 """
 
 from __future__ import annotations
 
+import ctypes
 import math
 import multiprocessing
+import os
 import queue
+import signal
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -27,6 +36,7 @@ import geometry
 
 from .frames import direction
 from . import embree, integrators
+from .integrators import fused, wavefront
 from .integrators.records import COUNT_NAMES, ENERGY_NAMES, ORDERS
 from .rng import geometry_rng, stream_key
 from .sensor import Sensor
@@ -224,16 +234,68 @@ def trace_units(plan: Plan, units, emit) -> None:
         emit((r, i), tally, scene.info)
 
 
-_queue = None
+#: what a process holds before any scene (interpreter, numpy, numba, Embree, compiled kernels)
+PROCESS_BYTES = 300 * 2**20
+#: bytes a path row of the embreex backend takes while its batch is traced (row, ray, outputs)
+PATH_ROW_BYTES = 80
+#: Linux prctl option: the signal a process gets when its parent dies
+PR_SET_PDEATHSIG = 1
 
 
-def _init_worker(q) -> None:
-    global _queue
-    _queue = q
+def memory_estimate(plan: Plan, sensor: Sensor, workers: int) -> int:
+    """Peak bytes of a run, all processes: each tracing process holds one realization's scene
+    (the generator's ``scene_bytes``), a batch of path rows or the chunk tallies of a wave, and
+    its unit's tally; the main process sums into per-incidence estimates and buffers the tallies
+    of units that arrive early (up to all but one worker's share)."""
+    tally = ORDERS * sensor.n_cells * 8
+    if plan.backend == "embreex":
+        paths = min(plan.paths_per_realization, wavefront.BATCH_PATHS) * PATH_ROW_BYTES
+    else:
+        paths = fused.WAVE_CHUNKS_PER_THREAD * plan.threads * (tally + 1024)
+    tracing = PROCESS_BYTES + plan.generator.scene_bytes(plan.scene) + paths + 2 * tally
+    units = len(plan.units)
+    reducing = 3 * plan.n_incidences * (ORDERS + 1) * sensor.n_cells * 8 + units * tally * (workers - 1) // workers
+    return tracing * workers + reducing + (PROCESS_BYTES if workers > 1 else 0)
 
 
-def _worker(plan: Plan, units) -> None:
-    trace_units(plan, units, lambda unit, tally, info: _queue.put((unit, tally, info)))
+def available_memory() -> int | None:
+    """MemAvailable of /proc/meminfo in bytes (None where there is none)."""
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
+
+
+def check_memory(plan: Plan, sensor: Sensor, workers: int) -> None:
+    """Refuse (PlanError, one line) a run whose :func:`memory_estimate` exceeds the free memory."""
+    need, free = memory_estimate(plan, sensor, workers), available_memory()
+    if free is not None and need > free:
+        raise PlanError(f"this run needs about {need / 2**30:.3g} GiB of memory ({workers} process(es), scene "
+                        f"{plan.generator.scene_bytes(plan.scene) / 2**30:.3g} GiB each, sensor.cells "
+                        f"{sensor.n_cells}) and {free / 2**30:.3g} GiB are free: lower the scene's tile or depth, "
+                        f"sensor.cells or --workers")
+
+
+def _worker(q, parent: int, plan: Plan, units) -> None:
+    """A worker process: dies with its parent, leaves SIGINT to it, sends (unit, tally, info) or
+    ("error", exception) on ``q``."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for name in ("SIGTERM", "SIGHUP"):
+        signal.signal(getattr(signal, name), signal.SIG_DFL)
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (OSError, AttributeError):  # not Linux: the parent still kills its workers on the way out
+        pass
+    if os.getppid() != parent:  # the parent died before the request
+        os._exit(1)
+    try:
+        trace_units(plan, units, lambda unit, tally, info: q.put((unit, tally, info)))
+    except BaseException as err:  # noqa: BLE001 - every failure goes to the parent, which raises it
+        q.put(("error", err))
 
 
 def split(units: list, parts: int) -> list[list]:
@@ -244,32 +306,53 @@ def split(units: list, parts: int) -> list[list]:
 
 def run(config, workers: int = 1, threads: int = 1, progress=None) -> Result:
     """Trace a validated config on ``workers`` processes of ``threads`` threads each;
-    ``progress(paths_done)`` is called as units complete. Raises PlanError (one line)."""
+    ``progress(unit, paths)`` is called as units complete. Raises PlanError (one line)."""
     plan = Plan.from_config(config, threads, workers)
     sensor = Sensor.build(plan.sensor_cells)
+    check_memory(plan, sensor, workers)
     reducer = _Reducer(plan, sensor)
     start = time.perf_counter()
 
     def collect(unit, tally, info):
         reducer.add(unit, tally, info)
         if progress is not None:
-            progress(tally.paths)
+            progress(unit, tally.paths)
 
     blocks = split(plan.units, max(1, workers))
     if len(blocks) <= 1:
         trace_units(plan, plan.units, collect)
     else:
         plan.tracer_class.compile(sensor, **plan.tracer_options)
-        context = multiprocessing.get_context("fork")
-        q = context.Queue()
-        with ProcessPoolExecutor(len(blocks), mp_context=context, initializer=_init_worker, initargs=(q,)) as pool:
-            futures = [pool.submit(_worker, plan, block) for block in blocks]
-            while not reducer.done:
-                try:
-                    collect(*q.get(timeout=0.2))
-                except queue.Empty:
-                    for f in futures:
-                        if f.done() and f.exception() is not None:
-                            raise f.exception()
+        _trace_on_workers(plan, blocks, reducer, collect)
     reducer.result.wall_time = time.perf_counter() - start
     return reducer.result
+
+
+def _trace_on_workers(plan: Plan, blocks, reducer, collect) -> None:
+    """One forked worker per block; every worker is killed if this returns any other way than
+    with every unit collected."""
+    context = multiprocessing.get_context("fork")
+    q = context.Queue()
+    processes = [context.Process(target=_worker, args=(q, os.getpid(), plan, block), daemon=True)
+                 for block in blocks]
+    try:
+        for process in processes:
+            process.start()
+        while not reducer.done:
+            try:
+                message = q.get(timeout=0.2)
+            except queue.Empty:
+                dead = [p for p in processes if p.exitcode not in (None, 0)]
+                if dead:
+                    raise RuntimeError(f"a worker process died (exit code {dead[0].exitcode})") from None
+                continue
+            if message[0] == "error":
+                raise message[1]
+            collect(*message)
+    finally:
+        for process in processes:
+            if process.is_alive():
+                process.kill()
+        for process in processes:
+            process.join(timeout=5)
+        q.close()

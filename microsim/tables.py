@@ -18,12 +18,19 @@ Layout (required by CONVENTIONS 6, plus extras marked +):
     + scene/<count> (R,): what each realization generated (spheres, images, triangles, ...)
     + diagnostics/segments, inside_hits, roulette_kills (n_i,)
 
+Every dataset carries a Fletcher-32 checksum and the file is written in the HDF5 1.10 format,
+whose metadata (headers, chunk indexes) carry checksums too, so damaged bytes fail on reading.
+:func:`load` checks that the datasets are present, readable, consistently shaped and free of NaN,
+and raises :class:`TableError` with one line naming the dataset otherwise; tables written before
+the checksums still load.
+
 The file is written under a temporary name in the same directory and renamed when complete.
 """
 
 from __future__ import annotations
 
 import datetime
+import hashlib
 import json
 import os
 from dataclasses import dataclass, field
@@ -34,7 +41,7 @@ import numpy as np
 
 from . import __version__
 from .frames import direction
-from .integrators.records import COUNT_NAMES, ENERGY_NAMES
+from .integrators.records import COUNT_NAMES, ENERGY_NAMES, ORDERS
 from .sensor import Sensor
 
 
@@ -66,13 +73,26 @@ def _toml_value(value) -> str:
     return repr(value)
 
 
-def write(path: str | Path, result, config) -> Path:
-    """Write the table of a :class:`microsim.runner.Result` atomically; return the path."""
+class TableExists(FileExistsError):
+    """The table's path was taken (by another run, or a user) while this one traced; the new table
+    was kept under another name, ``kept``."""
+
+    def __init__(self, path: Path, kept: Path):
+        super().__init__(f"{path} appeared while the run traced; this run's table was kept as {kept} "
+                         f"(pass --force to overwrite)")
+        self.kept = kept
+
+
+def write(path: str | Path, result, config, overwrite: bool = False) -> Path:
+    """Write the table of a :class:`microsim.runner.Result` atomically; return the path.
+
+    Without ``overwrite``, an existing file at ``path`` is never replaced, even one that appeared
+    while the run traced: raises :class:`TableExists` and leaves both files as they were."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     plan, sensor = result.plan, result.sensor
     try:
-        with h5py.File(tmp, "w") as h5:
+        with h5py.File(tmp, "w", libver=("v110", "v110")) as h5:
             h5.attrs["microsim_version"] = __version__
             h5.attrs["config_toml"] = config_to_toml(config)
             h5.attrs["created_utc"] = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
@@ -84,43 +104,78 @@ def write(path: str | Path, result, config) -> Path:
             h5.attrs["max_order"] = config.run.max_order
             h5.attrs["backend"] = plan.backend
             h5.attrs["backend_fallback"] = plan.backend_note
-            h5["incidence/theta"] = plan.theta_i
-            h5["incidence/phi"] = plan.phi_i
-            t_lo, t_hi, p_lo, p_hi = sensor.cell_bounds()
-            h5["sensor/theta_lo"], h5["sensor/theta_hi"] = t_lo, t_hi
-            h5["sensor/phi_lo"], h5["sensor/phi_hi"] = p_lo, p_hi
-            h5["sensor/direction"] = sensor.directions()
-            h5["sensor/solid_angle"] = sensor.solid_angle()
-            h5["sensor/projected_solid_angle"] = sensor.projected_solid_angle()
-            h5["sensor/ring_counts"] = sensor.ring_counts
+            _store(h5, "incidence/theta", plan.theta_i)
+            _store(h5, "incidence/phi", plan.phi_i)
+            for name, bounds in zip(("theta_lo", "theta_hi", "phi_lo", "phi_hi"), sensor.cell_bounds()):
+                _store(h5, f"sensor/{name}", bounds)
+            _store(h5, "sensor/direction", sensor.directions())
+            _store(h5, "sensor/solid_angle", sensor.solid_angle())
+            _store(h5, "sensor/projected_solid_angle", sensor.projected_solid_angle())
+            _store(h5, "sensor/ring_counts", sensor.ring_counts)
             h5["sensor"].attrs["cells_requested"] = plan.sensor_cells
             brdf = result.brdf
-            h5["brdf"] = np.stack([e.mean[-1] for e in brdf])
-            h5["brdf_stderr"] = np.stack([e.stderr[-1] for e in brdf])
-            h5["brdf_order"] = np.stack([e.mean[:-1] for e in brdf])
-            h5["brdf_order_stderr"] = np.stack([e.stderr[:-1] for e in brdf])
-            h5["albedo"] = np.array([a.mean[-1] for a in result.albedo])
-            h5["albedo_stderr"] = np.array([a.stderr[-1] for a in result.albedo])
-            h5["albedo_order"] = np.stack([a.mean[:-1] for a in result.albedo])
-            h5["albedo_order_stderr"] = np.stack([a.stderr[:-1] for a in result.albedo])
+            _store(h5, "brdf", np.stack([e.mean[-1] for e in brdf]))
+            _store(h5, "brdf_stderr", np.stack([e.stderr[-1] for e in brdf]))
+            _store(h5, "brdf_order", np.stack([e.mean[:-1] for e in brdf]))
+            _store(h5, "brdf_order_stderr", np.stack([e.stderr[:-1] for e in brdf]))
+            _store(h5, "albedo", np.array([a.mean[-1] for a in result.albedo]))
+            _store(h5, "albedo_stderr", np.array([a.stderr[-1] for a in result.albedo]))
+            _store(h5, "albedo_order", np.stack([a.mean[:-1] for a in result.albedo]))
+            _store(h5, "albedo_order_stderr", np.stack([a.stderr[:-1] for a in result.albedo]))
             for j, name in enumerate((*ENERGY_NAMES, "balance")):
-                h5[f"energy/{name}"] = np.array([e.mean[j] for e in result.energy])
-                h5[f"energy/{name}_stderr"] = np.array([e.stderr[j] for e in result.energy])
-            h5["paths"] = result.paths
+                _store(h5, f"energy/{name}", np.array([e.mean[j] for e in result.energy]))
+                _store(h5, f"energy/{name}_stderr", np.array([e.stderr[j] for e in result.energy]))
+            _store(h5, "paths", result.paths)
             for j, name in enumerate(COUNT_NAMES):
-                h5[f"diagnostics/{name}"] = result.counts[:, j]
+                _store(h5, f"diagnostics/{name}", result.counts[:, j])
             scene = h5.create_group("scene")
             for key, value in plan.scene.items():
                 scene.attrs[key] = value
             infos = [result.scene_info[r] for r in sorted(result.scene_info)]
             for key in infos[0].keys() - plan.scene.keys():  # what varies between realizations
-                scene[key] = np.array([info[key] for info in infos])
+                _store(scene, key, np.array([info[key] for info in infos]))
             scene.attrs["triangles"] = max(info["triangles"] for info in infos)
-        os.replace(tmp, path)
+        _publish(tmp, path, overwrite)
     finally:
         if tmp.exists():
             tmp.unlink()
     return path
+
+
+def _publish(tmp: Path, path: Path, overwrite: bool) -> None:
+    """Rename the finished ``tmp`` to ``path``; without ``overwrite``, atomically refuse an existing
+    ``path`` (a hard link fails if the name exists; where links are not supported, a check just
+    before the rename narrows the window instead) and keep the table under a fresh name."""
+    if overwrite:
+        os.replace(tmp, path)
+        return
+    try:
+        os.link(tmp, path)
+    except FileExistsError:
+        kept = path.with_name(f"{path.stem}.{os.getpid()}{path.suffix}")
+        os.replace(tmp, kept)
+        raise TableExists(path, kept) from None
+    except OSError:  # a file system without hard links
+        if path.exists():
+            kept = path.with_name(f"{path.stem}.{os.getpid()}{path.suffix}")
+            os.replace(tmp, kept)
+            raise TableExists(path, kept) from None
+        os.replace(tmp, path)
+        return
+    tmp.unlink()
+
+
+def _store(group, name: str, data) -> None:
+    """One dataset with a Fletcher-32 checksum (h5py stores it chunked, as the checksum needs) and
+    the SHA-256 of its bytes in an attribute: Fletcher-32 passes a chunk zeroed with its checksum,
+    the digest (in the object header, which the 1.10 format checksums) does not."""
+    data = np.asarray(data)
+    dataset = group.create_dataset(name, data=data, fletcher32=True)
+    dataset.attrs["sha256"] = _digest(data)
+
+
+def _digest(data: np.ndarray) -> str:
+    return hashlib.sha256(np.ascontiguousarray(data).tobytes()).hexdigest()
 
 
 @dataclass
@@ -151,14 +206,52 @@ class Table:
         return direction(self.theta_i, self.phi_i)
 
 
+class TableError(ValueError):
+    """A damaged, incomplete or inconsistent table; the message is one line naming the dataset."""
+
+
+#: axes of every dataset whose shape is known, by HDF5 path
+AXES = {
+    **{f"incidence/{name}": ("incidences",) for name in ("theta", "phi")},
+    **{f"sensor/{name}": ("cells",)
+       for name in ("theta_lo", "theta_hi", "phi_lo", "phi_hi", "solid_angle", "projected_solid_angle")},
+    "sensor/direction": ("cells", "xyz"),
+    **{name: ("incidences", "cells")
+       for name in ("brdf", "brdf_stderr", "brdf_order1_base", "brdf_order1_base_stderr")},
+    **{name: ("incidences", "orders", "cells") for name in ("brdf_order", "brdf_order_stderr")},
+    **{name: ("incidences",) for name in ("albedo", "albedo_stderr", "paths")},
+    **{name: ("incidences", "orders") for name in ("albedo_order", "albedo_order_stderr")},
+    **{f"energy/{name}{suffix}": ("incidences",) for name in (*ENERGY_NAMES, "balance") for suffix in ("", "_stderr")},
+    **{f"diagnostics/{name}": ("incidences",) for name in COUNT_NAMES},
+}
+#: datasets every table has: those of CONVENTIONS 6 (brdf_order1_base only where there is a base,
+#: so it is checked when present), the ring counts the sensor is rebuilt from, and the per-order
+#: errors and albedos ``compare --order`` reads (every table :func:`write` made has them)
+REQUIRED = (
+    "incidence/theta", "incidence/phi", "sensor/theta_lo", "sensor/theta_hi", "sensor/phi_lo", "sensor/phi_hi",
+    "sensor/direction", "sensor/solid_angle", "sensor/projected_solid_angle", "sensor/ring_counts",
+    "brdf", "brdf_stderr", "brdf_order", "brdf_order_stderr", "albedo", "albedo_stderr", "albedo_order",
+    "albedo_order_stderr", "energy/transmitted", "energy/truncated", "paths",
+)
+
+
 def load(path: str | Path) -> Table:
-    """Read a table written by :func:`write` (raises OSError / KeyError on a foreign file)."""
+    """Read and check a table written by :func:`write`.
+
+    Raises OSError when the file is missing or not HDF5, :class:`TableError` when it is damaged
+    (a checksum mismatch), incomplete, inconsistently shaped or holds NaN.
+    """
     path = Path(path)
     with h5py.File(path, "r") as h5:
-        arrays = {}
-        h5.visititems(lambda name, obj: arrays.__setitem__(name, obj[()]) if isinstance(obj, h5py.Dataset) else None)
-        attrs = {k: _plain(v) for k, v in h5.attrs.items()}
-        scene = {k: _plain(v) for k, v in h5["scene"].attrs.items()}
+        try:
+            arrays = _read_datasets(h5)
+            attrs = {k: _plain(v) for k, v in h5.attrs.items()}
+            scene = {k: _plain(v) for k, v in h5["scene"].attrs.items()} if "scene" in h5 else None
+        except (OSError, RuntimeError) as err:  # damaged metadata above the datasets: links, attributes
+            raise TableError(f"HDF5 structure is damaged ({err})") from None
+    if scene is None:
+        raise TableError("scene is missing")
+    _check(arrays)
     sensor = Sensor.from_ring_counts(arrays["sensor/ring_counts"])
     return Table(
         path, attrs, scene, arrays["incidence/theta"], arrays["incidence/phi"], sensor,
@@ -166,6 +259,55 @@ def load(path: str | Path) -> Table:
         arrays["brdf_order"], arrays["albedo"], arrays["albedo_stderr"], arrays["energy/transmitted"],
         arrays["energy/truncated"], arrays["paths"], arrays,
     )
+
+
+def _read_datasets(group: h5py.Group, prefix: str = "") -> dict:
+    """Every dataset under ``group`` by its HDF5 path; one that cannot be opened or read raises TableError."""
+    arrays = {}
+    for key in group:
+        name = prefix + key
+        try:
+            obj = group[key]
+        except KeyError as err:  # how h5py reports a header it cannot read (a metadata checksum mismatch)
+            raise TableError(f"{name} is damaged ({err.args[0]})") from None
+        if isinstance(obj, h5py.Group):
+            arrays.update(_read_datasets(obj, f"{name}/"))
+        elif isinstance(obj, h5py.Dataset):
+            try:
+                arrays[name] = obj[()]
+                digest = obj.attrs.get("sha256")
+            except OSError as err:  # how h5py reports a failed Fletcher-32 check: a failed filter
+                reason = "checksum mismatch" if obj.fletcher32 and "filter" in str(err) else str(err)
+                raise TableError(f"dataset {name} is damaged ({reason})") from None
+            if digest is not None and _plain(digest) != _digest(arrays[name]):
+                raise TableError(f"dataset {name} is damaged (SHA-256 mismatch)")
+    return arrays
+
+
+def _check(arrays: dict) -> None:
+    """Raise TableError unless ``arrays`` hold every required dataset, consistently shaped, without NaN."""
+    missing = [name for name in REQUIRED if name not in arrays]
+    if missing:
+        raise TableError(f"{', '.join(missing)} {'is' if len(missing) == 1 else 'are'} missing")
+    for name in REQUIRED:
+        if arrays[name].dtype.kind not in "biuf":
+            raise TableError(f"{name} holds {arrays[name].dtype} values, expected numbers")
+    counts, theta = arrays["sensor/ring_counts"], arrays["incidence/theta"]
+    if counts.ndim != 1 or counts.size == 0 or np.any(counts < 1):
+        raise TableError(f"sensor/ring_counts holds {counts.tolist()}, expected cell counts >= 1, one per ring")
+    if theta.ndim != 1:
+        raise TableError(f"incidence/theta has shape {theta.shape}, expected (incidences,)")
+    sizes = {"incidences": theta.size, "cells": int(counts.sum()), "orders": ORDERS, "xyz": 3}
+    for name, axes in AXES.items():
+        expected = tuple(sizes[axis] for axis in axes)
+        if name in arrays and arrays[name].shape != expected:
+            raise TableError(f"{name} has shape {arrays[name].shape}, expected {expected} ({' x '.join(axes)})")
+    for name, values in arrays.items():
+        if values.dtype.kind == "f":
+            if nan := np.count_nonzero(np.isnan(values)):
+                raise TableError(f"{name} holds NaN in {nan} of {values.size} values")
+            if infinite := np.count_nonzero(np.isinf(values)):
+                raise TableError(f"{name} holds infinity in {infinite} of {values.size} values")
 
 
 def _plain(value):

@@ -1,7 +1,9 @@
 """`microsim run` end to end: determinism across workers (acceptance e), bad input (acceptance f)."""
 
+import os
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import h5py
@@ -94,6 +96,7 @@ BAD_CONFIGS = {
     "missing run section": (edit("[run]\npaths = 20_000\nrealizations = 4\nseed = 5\n", ""), "run"),
     "one realization": (edit("realizations = 4", "realizations = 1"), "run.realizations"),
     "unknown backend": (edit("seed = 5", 'seed = 5\nbackend = "gpu"'), "run.backend"),
+    "name with a control character": (edit('name = "small"', 'name = "sm\\u0000all"'), "name"),
     "base under a plane": (lambda text: text.replace('kind = "poisson_spheres"\nvolume_fraction = 0.3\ntile = 16.0\ndepth = 8.0',
                                                      'kind = "plane"') + '\n[base]\nkind = "absorber"\n', "base"),
 }
@@ -111,6 +114,32 @@ def test_bad_config_gives_one_line_naming_the_key_and_exit_2(case, tmp_path, cap
     assert len(lines) == 1 and key in lines[0] and "Traceback" not in captured.err
     assert captured.out == ""
     assert not out.exists() and list(tmp_path.iterdir()) == [config]
+
+
+def test_a_config_that_is_not_utf8_gives_one_line(tmp_path, capsys):
+    config = tmp_path / "latin1.toml"
+    config.write_bytes(SPHERES.replace('name = "small"', 'name = "caf\xe9"').encode("latin-1"))
+    assert main(["run", str(config), "--out", str(tmp_path / "t.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err.splitlines() == [f"microsim: error: config file {str(config)!r} is not UTF-8 text (byte 0xe9 at "
+                                f"offset 12); TOML files are UTF-8"]  # after a newline and name = "caf
+    assert list(tmp_path.iterdir()) == [config]
+
+
+@pytest.mark.parametrize("name", ["../escaped", "/tmp/absolute", "sub/dir"])
+def test_the_default_table_is_named_from_the_config_file_in_the_current_directory(name, tmp_path, monkeypatch):
+    """``name`` is a label stored in the table, never a path (issue 9, defect 3)."""
+    here = tmp_path / "here"
+    here.mkdir()
+    config = tmp_path / "small.toml"
+    config.write_text(SPHERES.replace('name = "small"', f'name = "{name}"').replace("paths = 20_000", "paths = 400"))
+    monkeypatch.chdir(here)
+    before = set(Path("/tmp").iterdir())
+    assert main(["run", str(config)]) == 0
+    assert [p.name for p in here.iterdir()] == ["small.h5"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["here", "small.toml"] and set(Path("/tmp").iterdir()) == before
+    with h5py.File(here / "small.h5") as h5:
+        assert tomllib.loads(h5.attrs["config_toml"])["name"] == name
 
 
 @pytest.mark.parametrize("argv, key", [
@@ -147,3 +176,45 @@ def test_shipped_configs_validate():
     assert {"plane.toml", "spheres_phi010.toml", "spheres_phi030.toml", "spheres_phi060.toml"} <= {p.name for p in shipped}
     for path in shipped:
         config.load(path)
+
+
+def test_a_table_that_appears_while_the_run_traces_is_not_replaced(tmp_path, capsys, monkeypatch):
+    """The overwrite check holds at the final rename, atomically, not only at start-up (issue 9,
+    defect 4): the file that appeared is kept, and so is the run's table, under another name."""
+    from microsim import runner
+
+    config = tmp_path / "small.toml"
+    config.write_text(SPHERES.replace("paths = 20_000", "paths = 400"))
+    out = tmp_path / "t.h5"
+    real_run = runner.run
+
+    def run_while_someone_writes_out(*args, **kwargs):
+        result = real_run(*args, **kwargs)
+        out.write_bytes(b"written meanwhile")
+        return result
+
+    monkeypatch.setattr(runner, "run", run_while_someone_writes_out)
+    assert main(["run", str(config), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    kept = tmp_path / f"t.{os.getpid()}.h5"
+    assert err == [f"microsim: error: --out: {out} appeared while the run traced; this run's table was kept as "
+                   f"{kept} (pass --force to overwrite)"]
+    assert out.read_bytes() == b"written meanwhile" and h5py.is_hdf5(kept)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["small.toml", "t.h5", kept.name])
+    out.unlink()
+    assert main(["run", str(config), "--out", str(out), "--force"]) == 0 and h5py.is_hdf5(out)
+
+
+def test_two_runs_to_the_same_new_path_do_not_both_succeed(tmp_path):
+    from microsim import config as config_module, runner, tables
+
+    path = tmp_path / "c.toml"
+    path.write_text(SPHERES.replace("paths = 20_000", "paths = 400"))
+    cfg = config_module.load(path)
+    result = runner.run(cfg)
+    out = tmp_path / "t.h5"
+    tables.write(out, result, cfg)
+    first = out.read_bytes()
+    with pytest.raises(tables.TableExists):
+        tables.write(out, result, cfg)
+    assert out.read_bytes() == first

@@ -7,6 +7,10 @@ their next segments. Every pass goes through Python and embreex, which loops ove
 and allocates its outputs; the fused backend does without both. This one needs nothing but the
 embreex package: it is the fallback where the direct binding cannot load, and it traces
 triangles only.
+
+A unit's paths are traced in batches of at most ``BATCH_PATHS`` (paths keep their numbers, and
+so their random streams), so that memory does not grow with ``paths``: about 70 bytes a path of
+a batch (its row and embreex's outputs), 70 MB at most.
 """
 
 from __future__ import annotations
@@ -17,6 +21,9 @@ import numpy as np
 from .events import move_path
 from .records import SEGMENTS, allocate_paths, allocate_rays, empty_tally
 from .surface import follow, prepare_segment, start_path
+
+#: paths traced at once; their tallies are added batch after batch
+BATCH_PATHS = 1 << 20
 
 
 def backend(scene, threads: int):
@@ -45,17 +52,22 @@ class WavefrontBackend:
         self.paths, self.rays = allocate_paths(0), allocate_rays(0)
 
     def trace(self, beam, scene, sensor):
-        n = beam.n_paths
-        if len(self.paths.weight) < n:
-            self.paths, self.rays = allocate_paths(n), allocate_rays(n)
+        rows = min(beam.n_paths, BATCH_PATHS)
+        if len(self.paths.weight) < rows:
+            self.paths, self.rays = allocate_paths(rows), allocate_rays(rows)
+        tally = empty_tally(beam.n_paths, sensor.n_cells)
+        for first in range(0, beam.n_paths, BATCH_PATHS):
+            self._trace_batch(first, min(BATCH_PATHS, beam.n_paths - first), beam, scene, sensor, tally)
+        return tally
+
+    def _trace_batch(self, first, n, beam, scene, sensor, tally):
+        """Paths first .. first+n-1 of the beam, added to ``tally``."""
         paths, rays = self.paths, self.rays
-        tally = empty_tally(n, sensor.n_cells)
-        spawn_paths(paths, rays, n, beam, scene)
+        spawn_paths(paths, rays, first, n, beam, scene)
         while n > 0:
             hit = self.embree.run(rays.origin[:n], rays.direction[:n], dists=rays.tfar[:n], output=1)
             tally.counts[SEGMENTS] += n
             n = advance(n, paths, rays, (hit["primID"], hit["Ng"]), scene, sensor, beam.max_order, tally)
-        return tally
 
 
 def embree_scene(vertices, faces):
@@ -81,10 +93,10 @@ class _NoHits:
 
 
 @numba.njit(cache=True, error_model="numpy", _nrt=False)
-def spawn_paths(paths, rays, n, beam, scene):
-    """Start paths 0 .. n-1 of the beam in rows 0 .. n-1."""
+def spawn_paths(paths, rays, first, n, beam, scene):
+    """Start paths first .. first+n-1 of the beam in rows 0 .. n-1."""
     for i in range(n):
-        start_path(paths, rays, i, i, beam, scene)
+        start_path(paths, rays, i, first + i, beam, scene)
 
 
 @numba.njit(cache=True, error_model="numpy", _nrt=False)

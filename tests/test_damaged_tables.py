@@ -1,0 +1,145 @@
+"""Damaged or partial tables (issue 9, defect 6): checksums on every dataset, presence, shape and
+NaN checks on loading, and one line naming what is wrong from `microsim compare`."""
+
+import hashlib
+import re
+import shutil
+
+import h5py
+import numpy as np
+import pytest
+
+from microsim import compare, config, runner, tables
+from microsim.cli import main
+
+COMPARE = ["--model", "lambert", "--param", "albedo=0.5", "--order", "1"]
+
+
+@pytest.fixture(scope="module")
+def good_table(tmp_path_factory):
+    """A Lambertian plane, 2 incidences x 20 cells: small, but a real table."""
+    cfg = config.validate({
+        "scene": {"kind": "plane"},
+        "material": {"kind": "lambert", "albedo": 0.5},
+        "illumination": {"theta_i_deg": [0.0, 60.0]},
+        "sensor": {"cells": 20},
+        "run": {"paths": 2000, "realizations": 2, "seed": 1},
+    })
+    path = tmp_path_factory.mktemp("good") / "plane.h5"
+    return tables.write(path, runner.run(cfg), cfg)
+
+
+def damaged_copy(good_table, directory, damage):
+    """A copy of the good table with ``damage(h5)`` applied to it."""
+    path = directory / "damaged.h5"
+    shutil.copyfile(good_table, path)
+    with h5py.File(path, "r+") as h5:
+        damage(h5)
+    return path
+
+
+def compare_error(path, capsys) -> str:
+    """The one line `microsim compare` prints on stderr for a bad table (exit status 2)."""
+    assert main(["compare", str(path), *COMPARE]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and captured.out == "", captured
+    assert lines[0].startswith(f"microsim: error: TABLE.h5: {path}: ")
+    return lines[0]
+
+
+def replace_brdf_by_wrong_shape(h5):
+    n_i = h5["brdf"].shape[0]
+    del h5["brdf"]
+    h5["brdf"] = np.zeros((n_i, 7))
+
+
+def write_nan_into_a_cell(h5):
+    """NaN in a table as if it had been written so: its digest agrees."""
+    brdf = h5["brdf"][()]
+    brdf[1, 3] = np.nan
+    h5["brdf"][...] = brdf
+    h5["brdf"].attrs["sha256"] = hashlib.sha256(brdf.tobytes()).hexdigest()
+
+
+@pytest.mark.parametrize("damage, expected", [
+    (lambda h5: h5.__delitem__("brdf_order_stderr"), "brdf_order_stderr is missing"),
+    (lambda h5: h5.__delitem__("albedo_order"), "albedo_order is missing"),
+    (replace_brdf_by_wrong_shape, "brdf has shape (2, 7), expected (2, {cells}) (incidences x cells)"),
+    (write_nan_into_a_cell, "brdf holds NaN in 1 of {values} values"),
+], ids=["no brdf_order_stderr", "no albedo_order", "brdf of the wrong shape", "NaN in brdf"])
+def test_a_damaged_table_gives_one_line_naming_the_dataset(good_table, tmp_path, capsys, damage, expected):
+    cells = tables.load(good_table).sensor.n_cells
+    path = damaged_copy(good_table, tmp_path, damage)
+    assert compare_error(path, capsys).endswith(expected.format(cells=cells, values=2 * cells))
+
+
+def test_zeroed_bytes_fail_the_checksum(good_table, tmp_path, capsys):
+    with h5py.File(good_table, "r") as h5:
+        brdf = h5["brdf"][()].tobytes()
+    data = bytearray(good_table.read_bytes())
+    start = data.find(brdf)  # the stored values: one chunk, then its checksum
+    assert start > 0 and data.find(brdf, start + 1) < 0
+    # zero the middle of the values: a chunk zeroed whole, checksum included, would pass (the
+    # Fletcher-32 sum of zeros is zero)
+    data[start + 16:start + len(brdf) - 16] = bytes(len(brdf) - 32)
+    path = tmp_path / "zeroed.h5"
+    path.write_bytes(bytes(data))
+    assert compare_error(path, capsys).endswith("dataset brdf is damaged (checksum mismatch)")
+
+
+def test_a_chunk_zeroed_with_its_checksum_fails_the_digest(good_table, tmp_path, capsys):
+    """Fletcher-32 of zeros is zero: a chunk zeroed whole, checksum included, passes it; the
+    SHA-256 digest in the dataset's (checksummed) header does not."""
+    with h5py.File(good_table, "r") as h5:
+        brdf = h5["brdf"][()].tobytes()
+    data = bytearray(good_table.read_bytes())
+    start = data.find(brdf)
+    data[start:start + len(brdf) + 4] = bytes(len(brdf) + 4)  # the values and their Fletcher-32 sum
+    path = tmp_path / "zeroed.h5"
+    path.write_bytes(bytes(data))
+    assert compare_error(path, capsys).endswith("dataset brdf is damaged (SHA-256 mismatch)")
+
+
+def test_a_damaged_header_fails_its_checksum(good_table, tmp_path, capsys):
+    with h5py.File(good_table, "r") as h5:
+        header = h5py.h5o.get_info(h5["brdf"].id).addr
+    data = bytearray(good_table.read_bytes())
+    data[header + 16:header + 48] = bytes(32)
+    path = tmp_path / "header.h5"
+    path.write_bytes(bytes(data))
+    assert re.search(r": brdf is damaged \(.*metadata checksum.*\)$", compare_error(path, capsys))
+
+
+def test_written_datasets_carry_checksums_and_tables_without_them_still_compare(good_table, tmp_path, capsys):
+    names = []
+    with h5py.File(good_table, "r") as h5:
+        h5.visititems(lambda name, obj: names.append(name) if isinstance(obj, h5py.Dataset) else None)
+        assert names and all(h5[name].fletcher32 for name in names)
+    assert main(["compare", str(good_table), *COMPARE]) == 0
+    older = tmp_path / "older.h5"  # the same table as written before checksums
+    with h5py.File(good_table, "r") as src, h5py.File(older, "w") as dst:
+        for key, value in src.attrs.items():
+            dst.attrs[key] = value
+        for name in names:
+            dst[name] = src[name][()]
+        for group in ("sensor", "scene"):
+            dst.require_group(group).attrs.update(src[group].attrs)
+    assert main(["compare", str(older), *COMPARE]) == 0
+    assert "overall" in capsys.readouterr().out
+
+
+def test_nan_from_the_model_is_an_error_naming_it(good_table):
+    class NaNModel:
+        name, values = "nan_model", {}
+
+        def __call__(self, wi, wo):
+            return np.full(np.shape(wo)[:-1], np.nan)
+
+        def __repr__(self):
+            return "NaNModel()"
+
+    table = tables.load(good_table)
+    cells = table.brdf.size
+    with pytest.raises(ValueError, match=rf"^model NaNModel\(\) is NaN or infinite in {cells} of {cells} cells$"):
+        compare.compare(table, NaNModel(), "1")

@@ -1,0 +1,55 @@
+"""Memory does not grow with ``paths``, and a run that cannot fit is refused before it starts
+(issue 9, defect 2)."""
+
+import numpy as np
+
+from microsim import config, runner, tables
+from microsim.cli import main
+from microsim.integrators import wavefront
+from microsim.integrators.surface import SurfaceTracer
+from microsim.rng import geometry_rng
+from microsim.sensor import Sensor
+
+
+def spheres(paths: int, backend: str = "direct", **scene) -> config.Config:
+    return config.validate({
+        "scene": {"kind": "poisson_spheres", "volume_fraction": 0.3, "tile": 8.0, "depth": 3.0, **scene},
+        "material": {"kind": "lambert", "albedo": 0.8},
+        "illumination": {"theta_i_deg": [0.0, 60.0]},
+        "sensor": {"cells": 100},
+        "run": {"paths": paths, "realizations": 4, "backend": backend},
+    })
+
+
+def test_the_embreex_backend_traces_a_unit_in_batches_of_bounded_size(monkeypatch):
+    cfg = spheres(4, "embreex", subdivisions=1)
+    plan = runner.Plan.from_config(cfg)
+    scene = plan.generator.generate(plan.scene, plan.config, geometry_rng(1, 0))
+    sensor = Sensor.build(100)
+    whole = SurfaceTracer(scene, sensor, "embreex").trace(plan.incidence_direction(1), 5000, 7, 0)
+    monkeypatch.setattr(wavefront, "BATCH_PATHS", 1024)
+    tracer = SurfaceTracer(scene, sensor, "embreex")
+    batched = tracer.trace(plan.incidence_direction(1), 5000, 7, 0)
+    assert len(tracer.backend.paths.weight) == 1024  # rows held at once
+    assert np.array_equal(whole.counts, batched.counts)  # the same paths: streams keyed by path number
+    assert np.allclose(whole.exit_weight, batched.exit_weight, rtol=1e-12, atol=0)
+    assert np.allclose(whole.energy, batched.energy, rtol=1e-12, atol=0)
+
+
+def test_the_memory_estimate_does_not_grow_with_paths():
+    sensor = Sensor.build(100)
+    for backend, scene in (("direct", {}), ("embreex", {"subdivisions": 2})):
+        two_batches, huge = (runner.Plan.from_config(spheres(paths, backend, **scene))
+                             for paths in (4 * 2 * wavefront.BATCH_PATHS, 10**12))
+        assert runner.memory_estimate(huge, sensor, 2) == runner.memory_estimate(two_batches, sensor, 2)
+        assert runner.memory_estimate(huge, sensor, 1) < 2**30
+
+
+def test_a_run_that_cannot_fit_is_refused_in_one_line(tmp_path, capsys):
+    path = tmp_path / "huge.toml"
+    path.write_text(tables.config_to_toml(spheres(1000, tile=10_000.0, depth=1000.0)))  # 1e10 spheres
+    out = tmp_path / "huge.h5"
+    assert main(["run", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("microsim: error: this run needs about ") and "GiB are free" in err[0]
+    assert not out.exists()

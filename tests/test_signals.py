@@ -1,0 +1,93 @@
+"""Stopping a run: a signal to the main process alone stops every worker, writes nothing, and
+exits with 128 + the signal's number and one line; workers die with their parent even when it
+is killed by SIGKILL (issue 9, defect 1). Real processes: the run is started with the CLI,
+signalled once its workers trace, and the process table is read from /proc afterwards."""
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+RUN = Path(__file__).resolve().parent.parent / "runs" / "spheres_phi030.toml"
+pytestmark = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads the process table in /proc")
+
+
+def children(pid: int) -> list[int]:
+    """Processes whose parent is ``pid``."""
+    found = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                stat = Path(f"/proc/{entry}/stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                found.append(int(entry))
+    return found
+
+
+def running(pid: int) -> bool:
+    """Whether ``pid`` exists and is not a zombie."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def start_run(tmp_path, *options):
+    out = tmp_path / "stopped.h5"
+    command = [sys.executable, "-m", "microsim.cli", "run", str(RUN), "--paths", str(10**9), "--out", str(out), *options]
+    return subprocess.Popen(command, stderr=subprocess.PIPE, text=True, cwd=tmp_path), out
+
+
+def wait_until(condition, seconds: float) -> bool:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        if condition():
+            return True
+        time.sleep(0.1)
+    return condition()
+
+
+@pytest.mark.parametrize("name", ["SIGINT", "SIGTERM", "SIGHUP", "SIGKILL"])
+def test_a_signal_to_the_main_process_stops_every_worker(tmp_path, name):
+    signum = getattr(signal, name)
+    process, out = start_run(tmp_path, "--workers", "2")
+    workers = []
+    try:
+        assert wait_until(lambda: len(children(process.pid)) >= 2, 120), "the workers never started"
+        workers = children(process.pid)
+        time.sleep(2.0)  # tracing by now
+        process.send_signal(signum)
+        status = process.wait(timeout=15)
+        assert wait_until(lambda: not any(running(pid) for pid in workers), 10), "a worker outlived the run"
+        stderr = process.communicate(timeout=10)[1]  # EOF once no worker holds the pipe
+    finally:
+        for pid in [process.pid, *workers]:  # leave nothing running, whatever failed
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGKILL)
+    assert not out.exists() and list(tmp_path.iterdir()) == [], "something was written"
+    if signum == signal.SIGKILL:
+        assert status == -signal.SIGKILL
+    else:
+        assert status == 128 + signum
+        assert stderr.splitlines() == [f"microsim: error: stopped by {name}; no table written"]
+
+
+def test_a_run_on_threads_stops_on_sigterm(tmp_path):
+    process, out = start_run(tmp_path, "--threads", "2")
+    try:
+        time.sleep(8.0)
+        assert process.poll() is None
+        process.send_signal(signal.SIGTERM)
+        status = process.wait(timeout=15)
+        stderr = process.communicate(timeout=10)[1]
+    finally:
+        process.kill()
+    assert status == 128 + signal.SIGTERM and stderr.splitlines()[-1].endswith("stopped by SIGTERM; no table written")
+    assert list(tmp_path.iterdir()) == []
