@@ -2,8 +2,9 @@
 
 Bad input of any kind (CONVENTIONS 9) ends with one line on stderr naming the key or flag and
 what is accepted, exit status 2, no traceback, and no output file. A run stopped by SIGINT,
-SIGTERM or SIGHUP stops its workers, writes nothing, says so in one line and exits with
-128 + the signal's number (130, 143, 129), as a shell reports a process killed by it.
+SIGTERM or SIGHUP stops its workers, writes nothing, says so in one line and then dies of that
+signal (a shell reports 130, 143, 129; a shell loop stops on Ctrl-C as it should). A signal
+that was ignored when microsim started (nohup, a background job) stays ignored.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import math
 import os
 import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -36,21 +38,33 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 class Stopped(click.ClickException):
-    """A run stopped by a signal: exit status 128 + its number."""
+    """A run stopped by a signal: exit status 128 + its number (:func:`main` then dies of it)."""
 
     def __init__(self, signum: int):
         super().__init__(f"stopped by {signal.Signals(signum).name}; no table written")
+        self.signum = signum
         self.exit_code = 128 + signum
 
 
 @contextlib.contextmanager
 def _stop_on_signals():
-    """Within the block, STOP_SIGNALS raise :class:`Stopped` (in the main thread, between bytecodes:
-    the runner's clean-up then kills its workers)."""
-    def stop(signum, frame):
-        raise Stopped(signum)
+    """Within the block, the first of STOP_SIGNALS raises :class:`Stopped` (in the main thread,
+    between bytecodes: the runner's clean-up then kills its workers); later ones are ignored while
+    it stops. Signals ignored on entry stay ignored; outside the main thread nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    stopping = []
 
-    previous = {signum: signal.signal(signum, stop) for signum in STOP_SIGNALS}
+    def stop(signum, frame):
+        if not stopping:
+            stopping.append(signum)
+            raise Stopped(signum)
+
+    previous = {signum: signal.getsignal(signum) for signum in STOP_SIGNALS}
+    for signum, handler in previous.items():
+        if handler is not signal.SIG_IGN:
+            signal.signal(signum, stop)
     try:
         yield
     finally:
@@ -102,8 +116,10 @@ def run(config_path, out, workers, threads, backend, paths, seed, force):
     with _stop_on_signals(), _progress(plan) as advance:
         try:
             result = runner.run(config, workers=workers, threads=threads, progress=advance)
-        except embree.EmbreeUnavailable as err:  # a worker's own check of the binding failed
+        except (embree.EmbreeUnavailable, runner.WorkerFailed) as err:  # in a worker, one line each
             raise click.ClickException(str(err)) from None
+        except runner.PlanError as err:
+            raise BadInput(str(err)) from None
         try:
             tables.write(out, result, config, overwrite=force)
         except tables.TableExists as err:
@@ -257,6 +273,10 @@ def main(argv=None) -> int:
     except click.ClickException as err:
         message = err.format_message().replace("\n", " ")
         click.echo(f"microsim: error: {message}", err=True)
+        if isinstance(err, Stopped) and threading.current_thread() is threading.main_thread():
+            sys.stderr.flush()
+            signal.signal(err.signum, signal.SIG_DFL)
+            os.kill(os.getpid(), err.signum)  # die of it, as the shell expects
         return EXIT_BAD_INPUT if isinstance(err, (click.UsageError, BadInput)) else err.exit_code
     return 0
 

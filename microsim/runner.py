@@ -24,8 +24,8 @@ from __future__ import annotations
 import ctypes
 import math
 import multiprocessing
+import multiprocessing.connection
 import os
-import queue
 import signal
 import time
 from dataclasses import dataclass, field
@@ -234,8 +234,12 @@ def trace_units(plan: Plan, units, emit) -> None:
         emit((r, i), tally, scene.info)
 
 
-#: what a process holds before any scene (interpreter, numpy, numba, Embree, compiled kernels)
-PROCESS_BYTES = 300 * 2**20
+#: what the main process holds before any scene (interpreter, numpy, numba, Embree, kernels):
+#: 225 MiB resident measured on phi = 0.3
+PROCESS_BYTES = 250 * 2**20
+#: what a forked worker adds before its scene: 50 MiB proportional set size measured (the rest
+#: is shared with the main process, copy on write)
+WORKER_BYTES = 100 * 2**20
 #: bytes a path row of the embreex backend takes while its batch is traced (row, ray, outputs)
 PATH_ROW_BYTES = 80
 #: Linux prctl option: the signal a process gets when its parent dies
@@ -243,59 +247,80 @@ PR_SET_PDEATHSIG = 1
 
 
 def memory_estimate(plan: Plan, sensor: Sensor, workers: int) -> int:
-    """Peak bytes of a run, all processes: each tracing process holds one realization's scene
-    (the generator's ``scene_bytes``), a batch of path rows or the chunk tallies of a wave, and
-    its unit's tally; the main process sums into per-incidence estimates and buffers the tallies
-    of units that arrive early (up to all but one worker's share)."""
+    """Peak bytes of a run, all processes: each tracing process (the main one, or one forked
+    worker per block of units) holds one realization's scene (the generator's ``scene_bytes``), a
+    batch of path rows or the chunk tallies of a wave, and its unit's tally; the main process
+    sums into per-incidence estimates and buffers the tallies of units that arrive early (up to
+    all but one worker's share)."""
     tally = ORDERS * sensor.n_cells * 8
     if plan.backend == "embreex":
         paths = min(plan.paths_per_realization, wavefront.BATCH_PATHS) * PATH_ROW_BYTES
     else:
         paths = fused.WAVE_CHUNKS_PER_THREAD * plan.threads * (tally + 1024)
-    tracing = PROCESS_BYTES + plan.generator.scene_bytes(plan.scene) + paths + 2 * tally
+    tracing = plan.generator.scene_bytes(plan.scene) + paths + 2 * tally
     units = len(plan.units)
-    reducing = 3 * plan.n_incidences * (ORDERS + 1) * sensor.n_cells * 8 + units * tally * (workers - 1) // workers
-    return tracing * workers + reducing + (PROCESS_BYTES if workers > 1 else 0)
+    processes = len(split(plan.units, max(1, workers)))
+    reducing = 3 * plan.n_incidences * (ORDERS + 1) * sensor.n_cells * 8 + units * tally * (processes - 1) // processes
+    workers_bytes = WORKER_BYTES * processes if processes > 1 else 0
+    return PROCESS_BYTES + workers_bytes + tracing * processes + reducing
 
 
 def available_memory() -> int | None:
-    """MemAvailable of /proc/meminfo in bytes (None where there is none)."""
+    """Bytes free for this run: MemAvailable of /proc/meminfo, or less where a cgroup (v2) limits
+    this process (a container); None where neither can be read."""
+    free = None
     try:
         with open("/proc/meminfo") as meminfo:
             for line in meminfo:
                 if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
+                    free = int(line.split()[1]) * 1024
     except OSError:
         pass
-    return None
+    try:
+        limit = open("/sys/fs/cgroup/memory.max").read().strip()
+        if limit != "max":
+            used = int(open("/sys/fs/cgroup/memory.current").read())
+            free = min(free if free is not None else math.inf, int(limit) - used)
+    except (OSError, ValueError):
+        pass
+    return free
 
 
 def check_memory(plan: Plan, sensor: Sensor, workers: int) -> None:
     """Refuse (PlanError, one line) a run whose :func:`memory_estimate` exceeds the free memory."""
     need, free = memory_estimate(plan, sensor, workers), available_memory()
     if free is not None and need > free:
-        raise PlanError(f"this run needs about {need / 2**30:.3g} GiB of memory ({workers} process(es), scene "
-                        f"{plan.generator.scene_bytes(plan.scene) / 2**30:.3g} GiB each, sensor.cells "
+        raise PlanError(f"this run needs about {need / 2**30:.3g} GiB of memory (scene "
+                        f"{plan.generator.scene_bytes(plan.scene) / 2**30:.3g} GiB a tracing process, sensor.cells "
                         f"{sensor.n_cells}) and {free / 2**30:.3g} GiB are free: lower the scene's tile or depth, "
                         f"sensor.cells or --workers")
 
 
-def _worker(q, parent: int, plan: Plan, units) -> None:
-    """A worker process: dies with its parent, leaves SIGINT to it, sends (unit, tally, info) or
-    ("error", exception) on ``q``."""
+class WorkerFailed(RuntimeError):
+    """A worker process raised, or died; the message is one line."""
+
+
+def _worker(connection, parent: int, plan: Plan, units) -> None:
+    """A worker process: dies with its parent, leaves SIGINT to it (and keeps a signal ignored as
+    its parent found it, as under nohup), sends (unit, tally, info) for each unit, then ("done",),
+    or ("error", one line) on its own pipe."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    for name in ("SIGTERM", "SIGHUP"):
-        signal.signal(getattr(signal, name), signal.SIG_DFL)
+    for signum in (signal.SIGTERM, signal.SIGHUP):
+        if signal.getsignal(signum) is not signal.SIG_IGN:
+            signal.signal(signum, signal.SIG_DFL)
     try:
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+        prctl.argtypes = [ctypes.c_int, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong]
+        prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
     except (OSError, AttributeError):  # not Linux: the parent still kills its workers on the way out
         pass
     if os.getppid() != parent:  # the parent died before the request
         os._exit(1)
     try:
-        trace_units(plan, units, lambda unit, tally, info: q.put((unit, tally, info)))
-    except BaseException as err:  # noqa: BLE001 - every failure goes to the parent, which raises it
-        q.put(("error", err))
+        trace_units(plan, units, lambda unit, tally, info: connection.send((unit, tally, info)))
+        connection.send(("done",))
+    except Exception as err:  # noqa: BLE001 - sent as text: an exception need not pickle
+        connection.send(("error", f"{type(err).__name__}: {' '.join(str(err).split())}"))
 
 
 def split(units: list, parts: int) -> list[list]:
@@ -306,7 +331,8 @@ def split(units: list, parts: int) -> list[list]:
 
 def run(config, workers: int = 1, threads: int = 1, progress=None) -> Result:
     """Trace a validated config on ``workers`` processes of ``threads`` threads each;
-    ``progress(unit, paths)`` is called as units complete. Raises PlanError (one line)."""
+    ``progress(unit, paths)`` is called as units complete. Raises PlanError (one line), and
+    WorkerFailed if a worker raises or dies."""
     plan = Plan.from_config(config, threads, workers)
     sensor = Sensor.build(plan.sensor_cells)
     check_memory(plan, sensor, workers)
@@ -323,36 +349,44 @@ def run(config, workers: int = 1, threads: int = 1, progress=None) -> Result:
         trace_units(plan, plan.units, collect)
     else:
         plan.tracer_class.compile(sensor, **plan.tracer_options)
-        _trace_on_workers(plan, blocks, reducer, collect)
+        _trace_on_workers(plan, blocks, collect)
     reducer.result.wall_time = time.perf_counter() - start
     return reducer.result
 
 
-def _trace_on_workers(plan: Plan, blocks, reducer, collect) -> None:
-    """One forked worker per block; every worker is killed if this returns any other way than
-    with every unit collected."""
+def _trace_on_workers(plan: Plan, blocks, collect) -> None:
+    """One forked worker per block, each with a pipe of its own (a worker killed mid-message
+    cannot block the others, and its end of file shows at once). Every worker is killed if this
+    returns any other way than with every worker done."""
     context = multiprocessing.get_context("fork")
-    q = context.Queue()
-    processes = [context.Process(target=_worker, args=(q, os.getpid(), plan, block), daemon=True)
-                 for block in blocks]
+    processes, readers = [], {}
     try:
-        for process in processes:
+        for block in blocks:
+            reader, writer = context.Pipe(duplex=False)
+            process = context.Process(target=_worker, args=(writer, os.getpid(), plan, block), daemon=True)
+            processes.append(process)
             process.start()
-        while not reducer.done:
-            try:
-                message = q.get(timeout=0.2)
-            except queue.Empty:
-                dead = [p for p in processes if p.exitcode not in (None, 0)]
-                if dead:
-                    raise RuntimeError(f"a worker process died (exit code {dead[0].exitcode})") from None
-                continue
-            if message[0] == "error":
-                raise message[1]
-            collect(*message)
+            writer.close()  # only the worker writes: its death is an end of file here
+            readers[reader] = process
+        while readers:
+            for reader in multiprocessing.connection.wait(list(readers)):
+                process = readers[reader]
+                try:
+                    message = reader.recv()
+                except EOFError:
+                    process.join(timeout=5)
+                    raise WorkerFailed(f"a worker process died (exit code {process.exitcode})") from None
+                if message[0] == "done":
+                    del readers[reader]
+                elif message[0] == "error":
+                    raise WorkerFailed(f"a worker failed: {message[1]}")
+                else:
+                    collect(*message)
     finally:
         for process in processes:
             if process.is_alive():
                 process.kill()
         for process in processes:
             process.join(timeout=5)
-        q.close()
+        for reader in readers:
+            reader.close()

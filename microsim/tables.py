@@ -33,6 +33,7 @@ import datetime
 import hashlib
 import json
 import os
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -89,7 +90,12 @@ def write(path: str | Path, result, config, overwrite: bool = False) -> Path:
     Without ``overwrite``, an existing file at ``path`` is never replaced, even one that appeared
     while the run traced: raises :class:`TableExists` and leaves both files as they were."""
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    handle, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(handle)
+    tmp = Path(name)
+    umask = os.umask(0)
+    os.umask(umask)
+    tmp.chmod(0o666 & ~umask)  # mkstemp makes it private; a table is as readable as any new file
     plan, sensor = result.plan, result.sensor
     try:
         with h5py.File(tmp, "w", libver=("v110", "v110")) as h5:
@@ -152,17 +158,25 @@ def _publish(tmp: Path, path: Path, overwrite: bool) -> None:
     try:
         os.link(tmp, path)
     except FileExistsError:
-        kept = path.with_name(f"{path.stem}.{os.getpid()}{path.suffix}")
-        os.replace(tmp, kept)
-        raise TableExists(path, kept) from None
+        raise TableExists(path, _keep(tmp, path)) from None
     except OSError:  # a file system without hard links
         if path.exists():
-            kept = path.with_name(f"{path.stem}.{os.getpid()}{path.suffix}")
-            os.replace(tmp, kept)
-            raise TableExists(path, kept) from None
+            raise TableExists(path, _keep(tmp, path)) from None
         os.replace(tmp, path)
         return
     tmp.unlink()
+
+
+def _keep(tmp: Path, path: Path) -> Path:
+    """Link ``tmp`` to the first free name <stem>.<pid>[.<k>]<suffix> beside ``path``."""
+    for k in range(1000):
+        kept = path.with_name(f"{path.stem}.{os.getpid()}{f'.{k}' if k else ''}{path.suffix}")
+        try:
+            os.link(tmp, kept)
+            return kept
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"no free name beside {path} to keep the table")
 
 
 def _store(group, name: str, data) -> None:

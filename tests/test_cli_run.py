@@ -134,10 +134,12 @@ def test_the_default_table_is_named_from_the_config_file_in_the_current_director
     config = tmp_path / "small.toml"
     config.write_text(SPHERES.replace('name = "small"', f'name = "{name}"').replace("paths = 20_000", "paths = 400"))
     monkeypatch.chdir(here)
-    before = set(Path("/tmp").iterdir())
+    escaped = [Path(here, name + ".h5").resolve(), Path(here, name).resolve().parent / "small.h5"]
+    existed = [path.exists() for path in escaped]
     assert main(["run", str(config)]) == 0
     assert [p.name for p in here.iterdir()] == ["small.h5"]
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["here", "small.toml"] and set(Path("/tmp").iterdir()) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["here", "small.toml"]
+    assert [path.exists() for path in escaped] == existed  # nothing written where the name points
     with h5py.File(here / "small.h5") as h5:
         assert tomllib.loads(h5.attrs["config_toml"])["name"] == name
 
@@ -218,3 +220,31 @@ def test_two_runs_to_the_same_new_path_do_not_both_succeed(tmp_path):
     with pytest.raises(tables.TableExists):
         tables.write(out, result, cfg)
     assert out.read_bytes() == first
+
+
+def _raise_unpicklable(*args):
+    import threading
+
+    raise RuntimeError("no pickle for this", threading.Lock())
+
+
+def _exit_quietly(*args):
+    os._exit(0)
+
+
+@pytest.mark.parametrize("failure, line", [
+    (_raise_unpicklable, "microsim: error: a worker failed: RuntimeError: ('no pickle for this', <unlocked "),
+    (_exit_quietly, "microsim: error: a worker process died (exit code 0)"),
+])
+def test_a_failing_worker_ends_the_run_in_one_line(failure, line, tmp_path, capsys, monkeypatch):
+    """A worker whose exception does not pickle, or that exits without its units, must not leave
+    the main process waiting (it did, for ever)."""
+    from microsim import runner
+
+    config = tmp_path / "small.toml"
+    config.write_text(SPHERES.replace("paths = 20_000", "paths = 400"))
+    monkeypatch.setattr(runner, "trace_units", failure)  # the workers are forked from this process
+    assert main(["run", str(config), "--out", str(tmp_path / "t.h5"), "--workers", "2"]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith(line)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["small.toml"]
