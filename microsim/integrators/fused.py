@@ -1,17 +1,25 @@
 """The direct backend of the surface tracer: numba calls Embree itself, paths run to completion.
 
 The paths of a unit are cut into chunks of ``CHUNK_PATHS`` consecutive paths, and the chunks
-into waves of up to ``WAVE_CHUNKS_PER_THREAD`` per thread. Each chunk is traced to completion into a tally of its own:
-its paths one after the other, segment after segment (``rtcIntersect1`` on an ``RTCRayHit``
-record of its own, then the shared event kernels of :mod:`.surface`), with no Python between
-segments. ``threads`` Python threads share a wave, one numba call (:func:`trace_chunks`) each
-for a contiguous share of its chunks; the call releases the GIL, and all threads share one
-committed Embree scene. The chunk tallies are then summed in chunk order (:func:`add_chunks`). A path's random stream is keyed by its number, so a table depends neither
-on the number of threads nor on which thread traced which chunk: bit-identical for any thread
-count. Memory is one scene per process, a few hundred bytes per chunk row, and the tallies of
-one wave (WAVE_CHUNKS_PER_THREAD x threads x 4 x cells doubles). A chunk zeroes and adds a
-tally of 4 x cells doubles: at 256 paths a chunk that took 2-3 ns of a segment's 45 ns outside
-Embree (3240 cells, phi = 0.3); at 2048 paths it is negligible.
+into waves of up to ``WAVE_CHUNKS_PER_THREAD`` per thread. Each chunk is traced to completion
+into a tally of its own, segment after segment (``rtcIntersect1`` on an ``RTCRayHit`` record of
+its own, then the shared event kernels of :mod:`.surface`), with no Python between segments:
+two paths at a time (``SLOTS``), both queries then both events, so that the processor overlaps
+the two paths' event arithmetic; a slot whose path ends takes the chunk's next path
+(:func:`trace_chunk`). ``threads`` Python threads share a wave, one numba call
+(:func:`trace_chunks`) each for a contiguous share of its chunks; the call releases the GIL, and
+all threads share one committed Embree scene. The chunk tallies are then summed in chunk order
+(:func:`add_chunks`). A path's random stream is keyed by its number, and a chunk's order of
+events depends on its paths alone, so a table depends neither on the number of threads nor on
+which thread traced which chunk: bit-identical for any thread count.
+
+Time outside Embree, per segment on phi = 0.3 (1 thread, the same rays replayed through
+rtcIntersect1 alone; ``benchmarks/throughput.py``): 45 ns with one path at a time, 256-path
+chunks and atan2 in the exit binning; 35-40 ns with 2048-path chunks (a chunk zeroes and adds a
+tally of 4 x cells doubles) and the sensor's edge test; about 30 ns with two slots.
+
+Memory is one scene per process, a few hundred bytes per path row, and the tallies of one wave
+(WAVE_CHUNKS_PER_THREAD x threads x 4 x cells doubles).
 
 Python threads rather than a numba ``prange``: numba's parallel loops take no tuples of arrays
 (the named bundles), and its OpenMP layer is not fork-safe (the runner forks worker processes
@@ -38,6 +46,8 @@ CHUNK_PATHS = 2048
 #: chunks of a wave per thread, each thread tracing a contiguous share in one call; the wave's
 #: chunk tallies are then summed in chunk order
 WAVE_CHUNKS_PER_THREAD = 8
+#: paths of a chunk traced side by side (:func:`trace_chunk`)
+SLOTS = 2
 
 #: one row per chunk of a wave: the path it is tracing, its segment, its Embree query, its tally;
 #: and the ray log (origin, direction, tfar of every query, in order; empty unless asked for)
@@ -46,10 +56,11 @@ Workspace = namedtuple("Workspace", ["paths", "rays", "records", "exit_weight", 
 
 
 def workspace(rows: int, n_cells: int, log_rays: int = 0) -> Workspace:
+    """Tallies for ``rows`` chunks, and SLOTS path rows (paths, queries) for each."""
     tally = empty_tally(0, n_cells)
-    records = embree.ray_hits(rows)
-    rays = Rays(*embree.ray_views(records), np.zeros(rows, np.int8))  # segments written into the queries
-    return Workspace(allocate_paths(rows), rays, records,
+    records = embree.ray_hits(SLOTS * rows)
+    rays = Rays(*embree.ray_views(records), np.zeros(SLOTS * rows, np.int8))  # segments written into the queries
+    return Workspace(allocate_paths(SLOTS * rows), rays, records,
                      np.zeros((rows, ORDERS, n_cells)), np.zeros((rows, len(tally.energy))),
                      np.zeros((rows, len(tally.counts)), np.int64), np.zeros((log_rays, 7), np.float32),
                      np.zeros(1, np.int64))
@@ -104,22 +115,57 @@ class FusedBackend:
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def trace_chunks(first, start, stop, beam, scene, handle, sensor, work):
-    """Trace chunks first+start .. first+stop-1 of the beam to completion, chunk first+j in row j."""
+    """Trace chunks first+start .. first+stop-1 of the beam to completion, chunk first+j into tally
+    row j, its two path slots in rows 2j and 2j+1 (see :func:`trace_chunk`)."""
     for j in range(start, stop):
         tally = Tally(0, work.exit_weight[j], work.energy[j], work.counts[j])
         tally.exit_weight[:] = 0.0
         tally.energy[:] = 0.0
         tally.counts[:] = 0
         chunk = first + j
-        for number in range(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths)):
-            start_path(work.paths, work.rays, j, number, beam, scene)
-            alive = True
-            while alive:
-                hit = intersect(handle, work, j)
-                tally.counts[SEGMENTS] += 1
-                alive, o, d = follow(work.paths, work.rays, j, hit, scene, sensor, beam.max_order, tally)
-                if alive:
-                    prepare_segment(work.rays, j, o, d, scene)
+        trace_chunk(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths), 2 * j, beam, scene, handle,
+                    sensor, work, tally)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def trace_chunk(begin, end, row, beam, scene, handle, sensor, work, tally):
+    """Paths begin .. end-1, two at a time in rows ``row`` and ``row + 1``: both queries, then both
+    events, so that the processor overlaps the two paths' event arithmetic (independent chains of
+    divisions, square roots and random numbers); a slot whose path ends takes the next path."""
+    a, b = row, row + 1
+    alive_a, alive_b, number = False, False, begin
+    if number < end:
+        start_path(work.paths, work.rays, a, number, beam, scene)
+        alive_a, number = True, number + 1
+    if number < end:
+        start_path(work.paths, work.rays, b, number, beam, scene)
+        alive_b, number = True, number + 1
+    while alive_a and alive_b:
+        hit_a = intersect(handle, work, a)
+        hit_b = intersect(handle, work, b)
+        tally.counts[SEGMENTS] += 2
+        alive_a, number = event(work, a, hit_a, number, end, beam, scene, sensor, tally)
+        alive_b, number = event(work, b, hit_b, number, end, beam, scene, sensor, tally)
+    last = a if alive_a else b  # the other slot ran out of paths
+    alive = alive_a or alive_b
+    while alive:
+        hit = intersect(handle, work, last)
+        tally.counts[SEGMENTS] += 1
+        alive, number = event(work, last, hit, number, end, beam, scene, sensor, tally)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def event(work, row, hit, number, end, beam, scene, sensor, tally):
+    """The path in ``row`` met ``hit``: follow it, and prepare its next segment, or start path
+    ``number`` in its row if it ended and paths are left. Returns (row busy, next path number)."""
+    alive, o, d = follow(work.paths, work.rays, row, hit, scene, sensor, beam.max_order, tally)
+    if alive:
+        prepare_segment(work.rays, row, o, d, scene)
+        return True, number
+    if number < end:
+        start_path(work.paths, work.rays, row, number, beam, scene)
+        return True, number + 1
+    return False, number
 
 
 @numba.njit(cache=True, error_model="numpy", _nrt=False)
