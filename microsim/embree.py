@@ -249,7 +249,19 @@ def clear_hit(record):
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def closest_hit(handle, prim_offset, records, k):
     """Trace the query in ``records[k]``: (primitive number or -1, t, geometric normal in float32)."""
+    trace(handle, records, k)
+    return hit_of(prim_offset, records, k)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def trace(handle, records, k):
+    """Trace the query in ``records[k]``; the hit is left in the record (:func:`hit_of`)."""
     rtc_intersect1(handle, records.ctypes.data + k * RAYHIT_BYTES, 0)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def hit_of(prim_offset, records, k):
+    """The hit Embree left in ``records[k]``: (primitive number or -1, t, geometric normal in float32)."""
     record = records[k]
     if record.geomID == INVALID_ID:
         return -1, record.tfar, (record.Ng_x, record.Ng_y, record.Ng_z)

@@ -16,7 +16,9 @@ which thread traced which chunk: bit-identical for any thread count.
 Time outside Embree, per segment on phi = 0.3 (1 thread, the same rays replayed through
 rtcIntersect1 alone; ``benchmarks/throughput.py``): 45 ns with one path at a time, 256-path
 chunks and atan2 in the exit binning; 35-40 ns with 2048-path chunks (a chunk zeroes and adds a
-tally of 4 x cells doubles) and the sensor's edge test; about 30 ns with two slots.
+tally of 4 x cells doubles) and the sensor's edge test; about 30 ns with two slots. One loop
+body serves both slots: numba compiles the kernel in 27 s, against 5 s with one slot and 56 s
+with a third copy of the event kernels for the last slot alone.
 
 Memory is one scene per process, a few hundred bytes per path row, and the tallies of one wave
 (WAVE_CHUNKS_PER_THREAD x threads x 4 x cells doubles).
@@ -49,8 +51,9 @@ WAVE_CHUNKS_PER_THREAD = 8
 #: paths of a chunk traced side by side (:func:`trace_chunk`)
 SLOTS = 2
 
-#: one row per chunk of a wave: the path it is tracing, its segment, its Embree query, its tally;
-#: and the ray log (origin, direction, tfar of every query, in order; empty unless asked for)
+#: SLOTS rows per chunk of a wave (the paths it is tracing, their segments and Embree queries)
+#: and one row per chunk (its tally); and the ray log (origin, direction, tfar of every query,
+#: in order; empty unless asked for)
 Workspace = namedtuple("Workspace", ["paths", "rays", "records", "exit_weight", "energy", "counts", "log",
                                      "logged"])
 
@@ -131,34 +134,37 @@ def trace_chunks(first, start, stop, beam, scene, handle, sensor, work):
 def trace_chunk(begin, end, row, beam, scene, handle, sensor, work, tally):
     """Paths begin .. end-1, two at a time in rows ``row`` and ``row + 1``: both queries, then both
     events, so that the processor overlaps the two paths' event arithmetic (independent chains of
-    divisions, square roots and random numbers); a slot whose path ends takes the next path."""
+    divisions, square roots and random numbers); a slot whose path ends takes the next path.
+    One body serves both slots and the last one alone: numba inlines the event kernels twice
+    (with a third copy for the last slot, the kernel took 56 s to compile)."""
     a, b = row, row + 1
-    alive_a, alive_b, number = False, False, begin
+    busy_a, busy_b, number = False, False, begin
     if number < end:
         start_path(work.paths, work.rays, a, number, beam, scene)
-        alive_a, number = True, number + 1
+        busy_a, number = True, number + 1
     if number < end:
         start_path(work.paths, work.rays, b, number, beam, scene)
-        alive_b, number = True, number + 1
-    while alive_a and alive_b:
-        hit_a = intersect(handle, work, a)
-        hit_b = intersect(handle, work, b)
-        tally.counts[SEGMENTS] += 2
-        alive_a, number = event(work, a, hit_a, number, end, beam, scene, sensor, tally)
-        alive_b, number = event(work, b, hit_b, number, end, beam, scene, sensor, tally)
-    last = a if alive_a else b  # the other slot ran out of paths
-    alive = alive_a or alive_b
-    while alive:
-        hit = intersect(handle, work, last)
-        tally.counts[SEGMENTS] += 1
-        alive, number = event(work, last, hit, number, end, beam, scene, sensor, tally)
+        busy_b, number = True, number + 1
+    while busy_a or busy_b:
+        if busy_a:
+            query(handle, work, a)
+        if busy_b:
+            query(handle, work, b)
+        tally.counts[SEGMENTS] += busy_a + busy_b
+        if busy_a:
+            busy_a, number = event(work, a, number, end, handle, beam, scene, sensor, tally)
+        if busy_b:
+            busy_b, number = event(work, b, number, end, handle, beam, scene, sensor, tally)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def event(work, row, hit, number, end, beam, scene, sensor, tally):
-    """The path in ``row`` met ``hit``: follow it, and prepare its next segment, or start path
-    ``number`` in its row if it ended and paths are left. Returns (row busy, next path number)."""
-    alive, o, d = follow(work.paths, work.rays, row, hit, scene, sensor, beam.max_order, tally)
+def event(work, row, number, end, handle, beam, scene, sensor, tally):
+    """The path in ``row`` met the hit Embree left in its record: follow it, and prepare its next
+    segment, or start path ``number`` in its row if it ended and paths are left. Returns (row
+    busy, next path number)."""
+    prim, t, normal = embree.hit_of(handle.prim_offset, work.records, row)
+    alive, o, d = follow(work.paths, work.rays, row, (prim, np.float64(t), normal), scene, sensor, beam.max_order,
+                         tally)
     if alive:
         prepare_segment(work.rays, row, o, d, scene)
         return True, number
@@ -183,8 +189,9 @@ def add_chunks(total, work, count):
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def intersect(handle, work, j):
-    """Embree's closest hit on the segment in row j: (primitive or -1, distance, normal)."""
+def query(handle, work, j):
+    """Embree's closest hit on the segment in row j, left in its record (and the query logged if
+    a ray log is kept)."""
     rays = work.rays
     embree.clear_hit(work.records[j])  # the segment is in the query already (prepare_segment)
     if len(work.log):
@@ -195,5 +202,4 @@ def intersect(handle, work, j):
                 work.log[k, axis] = rays.origin[j, axis]
                 work.log[k, 3 + axis] = rays.direction[j, axis]
             work.log[k, 6] = rays.tfar[j]
-    prim, t, normal = embree.closest_hit(handle.handle, handle.prim_offset, work.records, j)
-    return prim, np.float64(t), normal
+    embree.trace(handle.handle, work.records, j)
