@@ -15,7 +15,9 @@ Workers are forked processes that die with the run: each asks Linux for SIGKILL 
 dies (prctl PR_SET_PDEATHSIG, so even a SIGKILL of the main process takes them along), ignores
 SIGINT (a terminal sends it to the whole group; the main process decides), and is killed by the
 main process as soon as the run ends in any other way than success (an exception, a signal
-turned into one by the CLI). Memory is estimated before anything is traced
+turned into one by the CLI); a signal in the microseconds of a worker's start can leave that
+worker to PR_SET_PDEATHSIG alone, which kills it when the main process exits. Memory is
+estimated before anything is traced
 (:func:`memory_estimate`) and a run that cannot fit is refused.
 """
 
