@@ -22,7 +22,6 @@ import click
 
 from . import config as config_module
 from .compare import ORDER_ROWS
-from .sensor import Sensor
 
 EXIT_BAD_INPUT = 2
 #: threads a process may run (Python threads, each tracing in a numba call without the GIL)
@@ -109,7 +108,6 @@ def run(config_path, out, workers, threads, backend, paths, seed, force):
     _check_writable(out, force)
     try:
         plan = runner.Plan.from_config(config, threads, workers)
-        runner.check_memory(plan, Sensor.build(plan.sensor_cells), workers)  # before the progress bar
     except runner.PlanError as err:
         raise BadInput(str(err)) from None
     total = plan.paths * plan.n_incidences

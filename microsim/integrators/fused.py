@@ -119,14 +119,14 @@ class FusedBackend:
 @numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def trace_chunks(first, start, stop, beam, scene, handle, sensor, work):
     """Trace chunks first+start .. first+stop-1 of the beam to completion, chunk first+j into tally
-    row j, its two path slots in rows 2j and 2j+1 (see :func:`trace_chunk`)."""
+    row j, its path slots in rows SLOTS j and on (see :func:`trace_chunk`)."""
     for j in range(start, stop):
         tally = Tally(0, work.exit_weight[j], work.energy[j], work.counts[j])
         tally.exit_weight[:] = 0.0
         tally.energy[:] = 0.0
         tally.counts[:] = 0
         chunk = first + j
-        trace_chunk(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths), 2 * j, beam, scene, handle,
+        trace_chunk(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths), SLOTS * j, beam, scene, handle,
                     sensor, work, tally)
 
 
