@@ -56,9 +56,9 @@ def versus(result, reference):
     ref_se = np.array([a.stderr[-1] for a in reference.albedo])
     chi2 = []
     for e, f in zip(result.brdf, reference.brdf):
-        se2 = e.stderr[-1] ** 2 + f.stderr[-1] ** 2
+        se2 = e.stderr[runner.ALL_ORDERS] ** 2 + f.stderr[runner.ALL_ORDERS] ** 2
         ok = se2 > 0
-        chi2.append(np.mean((e.mean[-1][ok] - f.mean[-1][ok]) ** 2 / se2[ok]))
+        chi2.append(np.mean((e.mean[runner.ALL_ORDERS][ok] - f.mean[runner.ALL_ORDERS][ok]) ** 2 / se2[ok]))
     z = np.abs(albedo - ref) / np.sqrt(albedo_se**2 + ref_se**2)
     return albedo, albedo_se, np.array(chi2), z
 

@@ -13,6 +13,6 @@ that cannot fit); and
 (for "surface", a ``microsim.scene.Scene`` assembled with ``SceneBuilder``).
 """
 
-from . import plane, poisson_spheres
+from . import micrograins, plane, poisson_spheres
 
-SCENES = {module.KIND: module for module in (plane, poisson_spheres)}
+SCENES = {module.KIND: module for module in (plane, poisson_spheres, micrograins)}

@@ -35,13 +35,37 @@ Scene = Annotated[Union[tuple(g.Config for g in geometry.SCENES.values())], Fiel
 
 
 class Illumination(Section):
+    """Incidences: ``theta_i_deg`` a list; ``phi_i_deg`` one azimuth for all, or a list as long as
+    ``theta_i_deg`` (one incidence per pair)."""
+
     theta_i_deg: list[Annotated[float, Field(ge=0.0, le=89.9)]] = Field(min_length=1, max_length=256)
-    phi_i_deg: float = Field(0.0, ge=-360.0, le=360.0)
+    phi_i_deg: list[Annotated[float, Field(ge=-360.0, le=360.0)]] = Field(
+        [0.0], min_length=1, max_length=256, description="one azimuth for all incidences, or one per theta_i_deg")
 
     @pydantic.field_validator("theta_i_deg", mode="before")
     @classmethod
     def _scalar_to_list(cls, v):
         return [v] if isinstance(v, (int, float)) and not isinstance(v, bool) else v
+
+    @pydantic.field_validator("phi_i_deg", mode="before")
+    @classmethod
+    def _one_azimuth(cls, v):
+        """One number is kept as a list of one: the azimuth of every incidence."""
+        return [v] if isinstance(v, (int, float)) and not isinstance(v, bool) else v
+
+    @pydantic.model_validator(mode="after")
+    def _paired(self):
+        if len(self.phi_i_deg) not in (1, len(self.theta_i_deg)):
+            raise ValueError(f"illumination.phi_i_deg: a list of {len(self.phi_i_deg)} azimuths for "
+                             f"{len(self.theta_i_deg)} theta_i_deg; accepted: one number, or a list as long as "
+                             "theta_i_deg")
+        return self
+
+    def azimuths_deg(self) -> list[float]:
+        """phi_i of every incidence, paired with ``theta_i_deg``."""
+        if len(self.phi_i_deg) == 1:
+            return self.phi_i_deg * len(self.theta_i_deg)
+        return list(self.phi_i_deg)
 
 
 class SensorSection(Section):
@@ -121,6 +145,8 @@ def describe_error(error: dict, data: dict) -> str:
         owner, node = node, _field(node, part)
     key = ".".join(keys) or "config"
     kind = error["type"]
+    if kind == "value_error":  # a rule of a section's own validator: its message is the line
+        return str(error["ctx"]["error"])
     shown = f" = {value!r}" if value is not None and not isinstance(value, dict) else ""
     if kind == "extra_forbidden":
         return f"{key}: unknown key; allowed keys here: {', '.join(owner.model_fields)}"

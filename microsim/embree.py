@@ -30,9 +30,12 @@ import numpy as np
 from numba import types
 
 #: RTCGeometryType, RTCBufferType and RTCFormat values (include/embree4/rtcore_*.h)
-GEOMETRY_TRIANGLE, GEOMETRY_SPHERE_POINT = 0, 50
+GEOMETRY_TRIANGLE, GEOMETRY_SPHERE_POINT, GEOMETRY_INSTANCE = 0, 50, 121
 BUFFER_INDEX, BUFFER_VERTEX = 0, 1
-FORMAT_UINT3, FORMAT_FLOAT3, FORMAT_FLOAT4 = 0x5003, 0x9003, 0x9004
+FORMAT_UINT3, FORMAT_FLOAT3, FORMAT_FLOAT4, FORMAT_FLOAT3X4_COLUMN_MAJOR = 0x5003, 0x9003, 0x9004, 0x9234
+#: geometry ids: the triangles, the spheres (in the top scene, or in the scene an instance holds:
+#: the id is then the same, so that ``prim_offset[geomID]`` numbers both), the instance
+TRIANGLES_ID, SPHERES_ID, INSTANCE_ID = 0, 1, 2
 #: RTCSceneFlags: no optimization that reduces arithmetic accuracy, as embreex builds its scenes
 #: (the two backends then find the same hits, to the bit); without it 13 % of hit distances on
 #: a sphere mesh differ
@@ -57,8 +60,9 @@ rtc_intersect1 = types.ExternalFunction("rtcIntersect1", types.void(types.intp, 
 rtc_occluded1 = types.ExternalFunction("rtcOccluded1", types.void(types.intp, types.intp, types.intp))
 
 
-#: what a kernel needs of a committed scene: its handle and the primitive offset of each geometry
-SceneHandle = namedtuple("SceneHandle", ["handle", "prim_offset"])
+#: what a kernel needs of a committed scene: its handle, the primitive offset of each geometry and
+#: the (x, y) scale of the spheres' frame (float64 (2,); see :class:`Scene`)
+SceneHandle = namedtuple("SceneHandle", ["handle", "prim_offset", "sphere_scale"])
 
 
 class EmbreeUnavailable(RuntimeError):
@@ -97,7 +101,9 @@ class _Library:
             ("rtcNewScene", p, [p]), ("rtcSetSceneFlags", None, [p, ctypes.c_int]),
             ("rtcCommitScene", None, [p]), ("rtcReleaseScene", None, [p]),
             ("rtcNewGeometry", p, [p, ctypes.c_int]), ("rtcSetNewGeometryBuffer", p, [p, ctypes.c_int, u, ctypes.c_int, s, s]),
-            ("rtcCommitGeometry", None, [p]), ("rtcAttachGeometry", u, [p, p]), ("rtcReleaseGeometry", None, [p]),
+            ("rtcCommitGeometry", None, [p]), ("rtcAttachGeometryByID", None, [p, p, u]),
+            ("rtcReleaseGeometry", None, [p]), ("rtcSetGeometryInstancedScene", None, [p, p]),
+            ("rtcSetGeometryTransform", None, [p, u, ctypes.c_int, p]),
         ):
             function = getattr(lib, name)
             function.restype, function.argtypes = restype, argtypes
@@ -134,11 +140,19 @@ class Scene:
     scene of triangles alone is built robust, as embreex builds its scenes, so that the two
     backends find the same hits (see SCENE_FLAG_ROBUST); with spheres it is not (4-9 % faster,
     the same sphere hits).
+
+    ``sphere_scale`` = (sx, sy) other than (1, 1): the spheres are given in the frame where x is
+    scaled by sx and y by sy, and stand for the ellipsoids that frame maps onto them. They go
+    into a scene of their own, which the top scene holds as an instance with the transform
+    diag(1/sx, 1/sy, 1) back to the world. Embree moves each ray into the instance's frame, so
+    the hit distance t is that of the world ray, and it reports the geometric normal in that
+    frame; :func:`hit_of` maps it back (normals go by the inverse transpose, diag(sx, sy, 1)).
     """
 
     handle = 0
+    _spheres_scene = 0
 
-    def __init__(self, vertices=None, faces=None, spheres=None, lib=None):
+    def __init__(self, vertices=None, faces=None, spheres=None, lib=None, sphere_scale=(1.0, 1.0)):
         lib = load() if lib is None else lib
         self._lib = lib
         self.handle = lib.check(lib.rtcNewScene(lib.device), "creating a scene")
@@ -147,12 +161,21 @@ class Scene:
             lib.rtcSetSceneFlags(self.handle, SCENE_FLAG_ROBUST)
         offsets, count = {}, 0
         if faces is not None and len(faces):
-            geometry = self._attach(GEOMETRY_TRIANGLE, [(BUFFER_VERTEX, FORMAT_FLOAT3, np.asarray(vertices, np.float32)),
-                                                        (BUFFER_INDEX, FORMAT_UINT3, np.asarray(faces, np.uint32))])
-            offsets[geometry], count = count, count + len(faces)
+            self._attach(self.handle, TRIANGLES_ID, GEOMETRY_TRIANGLE,
+                         [(BUFFER_VERTEX, FORMAT_FLOAT3, np.asarray(vertices, np.float32)),
+                          (BUFFER_INDEX, FORMAT_UINT3, np.asarray(faces, np.uint32))])
+            offsets[TRIANGLES_ID], count = count, count + len(faces)
+        self.sphere_scale = np.array(sphere_scale, np.float64)
         if has_spheres:
-            geometry = self._attach(GEOMETRY_SPHERE_POINT, [(BUFFER_VERTEX, FORMAT_FLOAT4, np.asarray(spheres, np.float32))])
-            offsets[geometry], count = count, count + len(spheres)
+            buffers = [(BUFFER_VERTEX, FORMAT_FLOAT4, np.asarray(spheres, np.float32))]
+            if tuple(sphere_scale) == (1.0, 1.0):
+                self._attach(self.handle, SPHERES_ID, GEOMETRY_SPHERE_POINT, buffers)
+            else:
+                self._spheres_scene = lib.check(lib.rtcNewScene(lib.device), "creating a scene")
+                self._attach(self._spheres_scene, SPHERES_ID, GEOMETRY_SPHERE_POINT, buffers)
+                lib.rtcCommitScene(self._spheres_scene)
+                self._attach_instance(self._spheres_scene, sphere_scale)
+            offsets[SPHERES_ID], count = count, count + len(spheres)
         lib.rtcCommitScene(self.handle)
         lib.check(self.handle, "committing the scene")
         self.prim_offset = np.zeros(max(offsets, default=0) + 1, dtype=np.int64)  # by the ids Embree gave
@@ -160,8 +183,8 @@ class Scene:
             self.prim_offset[geometry] = offset
         self.n_prims = count
 
-    def _attach(self, geometry_type: int, buffers) -> int:
-        """Attach one geometry of ``buffers`` (type, format, data); its geometry id."""
+    def _attach(self, scene, geometry_id: int, geometry_type: int, buffers) -> None:
+        """Attach to ``scene``, as ``geometry_id``, one geometry of ``buffers`` (type, format, data)."""
         lib = self._lib
         geometry = lib.check(lib.rtcNewGeometry(lib.device, geometry_type), "creating a geometry")
         for buffer_type, fmt, data in buffers:
@@ -170,19 +193,34 @@ class Scene:
             ctypes.memmove(lib.check(address, f"allocating a buffer of {len(data)} items"), data.ctypes.data,
                            data.nbytes)
         lib.rtcCommitGeometry(geometry)
-        geometry_id = lib.rtcAttachGeometry(self.handle, geometry)
+        lib.rtcAttachGeometryByID(scene, geometry, geometry_id)
         lib.rtcReleaseGeometry(geometry)
-        lib.check(self.handle, "building a geometry")
-        return geometry_id
+        lib.check(scene, "building a geometry")
+
+    def _attach_instance(self, scene, sphere_scale) -> None:
+        """The committed ``scene`` as an instance of the top scene, mapped by diag(1/sx, 1/sy, 1)."""
+        lib = self._lib
+        geometry = lib.check(lib.rtcNewGeometry(lib.device, GEOMETRY_INSTANCE), "creating an instance")
+        lib.rtcSetGeometryInstancedScene(geometry, scene)
+        transform = np.zeros((4, 3), np.float32)  # column-major 3 x 4: the images of x, y, z, then the shift
+        transform[0, 0], transform[1, 1], transform[2, 2] = 1.0 / sphere_scale[0], 1.0 / sphere_scale[1], 1.0
+        lib.rtcSetGeometryTransform(geometry, 0, FORMAT_FLOAT3X4_COLUMN_MAJOR, transform.ctypes.data)
+        lib.rtcCommitGeometry(geometry)
+        lib.rtcAttachGeometryByID(self.handle, geometry, INSTANCE_ID)
+        lib.rtcReleaseGeometry(geometry)
+        lib.check(self.handle, "building an instance")
 
     def arrays(self) -> SceneHandle:
-        return SceneHandle(self.handle, self.prim_offset)
+        return SceneHandle(self.handle, self.prim_offset, self.sphere_scale)
 
     def close(self) -> None:
         """Release the scene; no kernel may be tracing it (the backends own theirs until done)."""
         if self.handle:
             self._lib.rtcReleaseScene(self.handle)
             self.handle = 0
+        if self._spheres_scene:
+            self._lib.rtcReleaseScene(self._spheres_scene)
+            self._spheres_scene = 0
 
     def _open_handle(self) -> int:
         if not self.handle:
@@ -199,7 +237,8 @@ class Scene:
         tfar = np.ascontiguousarray(tfar, np.float32)
         n = len(origins)
         prim, t, normal = np.empty(n, np.int64), np.empty(n, np.float32), np.empty((n, 3), np.float32)
-        _intersect_all(self._open_handle(), self.prim_offset, origins, directions, tfar, ray_hits(1), (prim, t, normal))
+        self._open_handle()
+        _intersect_all(self.arrays(), origins, directions, tfar, ray_hits(1), (prim, t, normal))
         return prim, t, normal
 
     def occluded(self, origins, directions, tfar) -> np.ndarray:
@@ -247,10 +286,11 @@ def clear_hit(record):
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def closest_hit(handle, prim_offset, records, k):
-    """Trace the query in ``records[k]``: (primitive number or -1, t, geometric normal in float32)."""
-    trace(handle, records, k)
-    return hit_of(prim_offset, records, k)
+def closest_hit(handle, records, k):
+    """Trace the query in ``records[k]`` on the scene of ``handle`` (a :data:`SceneHandle`):
+    (primitive number or -1, t, geometric normal in float32)."""
+    trace(handle.handle, records, k)
+    return hit_of(handle, records, k)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
@@ -260,21 +300,26 @@ def trace(handle, records, k):
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def hit_of(prim_offset, records, k):
-    """The hit Embree left in ``records[k]``: (primitive number or -1, t, geometric normal in float32)."""
+def hit_of(handle, records, k):
+    """The hit Embree left in ``records[k]``: (primitive number or -1, t, geometric normal in
+    float32, in the world frame: a normal from inside the instance is mapped back, see :class:`Scene`)."""
     record = records[k]
+    ng = (record.Ng_x, record.Ng_y, record.Ng_z)
     if record.geomID == INVALID_ID:
-        return -1, record.tfar, (record.Ng_x, record.Ng_y, record.Ng_z)
-    return prim_offset[record.geomID] + record.primID, record.tfar, (record.Ng_x, record.Ng_y, record.Ng_z)
+        return -1, record.tfar, ng
+    if record.instID != INVALID_ID:
+        ng = (np.float32(record.Ng_x * handle.sphere_scale[0]), np.float32(record.Ng_y * handle.sphere_scale[1]),
+              record.Ng_z)
+    return handle.prim_offset[record.geomID] + record.primID, record.tfar, ng
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _intersect_all(handle, prim_offset, origins, directions, tfar, records, hits):
+def _intersect_all(handle, origins, directions, tfar, records, hits):
     prim, t, normal = hits
     for i in range(len(origins)):
         set_ray(records[0], (origins[i, 0], origins[i, 1], origins[i, 2]),
                 (directions[i, 0], directions[i, 1], directions[i, 2]), tfar[i])
-        p, distance, ng = closest_hit(handle, prim_offset, records, 0)
+        p, distance, ng = closest_hit(handle, records, 0)
         prim[i] = p
         t[i] = distance
         normal[i, 0], normal[i, 1], normal[i, 2] = ng

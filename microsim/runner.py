@@ -39,7 +39,7 @@ import geometry
 from .frames import direction
 from . import embree, integrators
 from .integrators import fused, wavefront
-from .integrators.records import COUNT_NAMES, ENERGY_NAMES, ORDERS
+from .integrators.records import BASE_ROW, COUNT_NAMES, ENERGY_NAMES, ORDERS, TALLY_ROWS
 from .rng import geometry_rng, stream_key
 from .sensor import Sensor
 
@@ -66,7 +66,7 @@ class Plan:
         backend can trace it, are resolved here, and every substitution is said in backend_note."""
         run = config.run
         theta = np.radians(np.asarray(config.illumination.theta_i_deg, dtype=np.float64))
-        phi = np.full_like(theta, math.radians(config.illumination.phi_i_deg))
+        phi = np.radians(np.asarray(config.illumination.azimuths_deg(), dtype=np.float64))
         backend, notes = resolve_backend(run.backend, check=workers == 1)
         if backend == "embreex" and threads > 1:
             if run.backend == "embreex":
@@ -159,13 +159,18 @@ class Estimate:
         return np.sqrt(var / n)
 
 
+#: rows of ``Result.brdf`` after the orders
+ALL_ORDERS, ORDER1_BASE = ORDERS, ORDERS + 1
+
+
 @dataclass
 class Result:
     """Per-incidence estimates of a run, ready for :func:`microsim.tables.write`."""
 
     plan: Plan
     sensor: Sensor
-    brdf: list  # per incidence: Estimate of f_C over (ORDERS + 1, n_cells), last row = all orders
+    brdf: list  # per incidence: Estimate of f_C over (ORDERS + 2, n_cells): the orders, all orders
+    #             (row ALL_ORDERS), order 1 scattered by the base (row ORDER1_BASE)
     albedo: list  # per incidence: Estimate over (ORDERS + 1,)
     energy: list  # per incidence: Estimate over (*ENERGY_NAMES, balance)
     counts: np.ndarray  # (n_incidences, len(COUNT_NAMES)) tracer event counts
@@ -185,7 +190,7 @@ class _Reducer:
         self.plan = plan
         self.result = Result(
             plan, sensor,
-            [Estimate.zeros((ORDERS + 1, n_c)) for _ in range(n_i)],
+            [Estimate.zeros((ORDERS + 2, n_c)) for _ in range(n_i)],
             [Estimate.zeros(ORDERS + 1) for _ in range(n_i)],
             [Estimate.zeros(len(ENERGY_NAMES) + 1) for _ in range(n_i)],
             np.zeros((n_i, len(COUNT_NAMES)), np.int64),
@@ -206,8 +211,8 @@ class _Reducer:
         i = unit[1]
         res = self.result
         per_path = tally.exit_weight / tally.paths
-        cells = np.vstack([per_path, per_path.sum(axis=0)])
-        res.brdf[i].add(cells / res.sensor.projected_solid_angle())
+        cells = np.vstack([per_path[:ORDERS], per_path[:ORDERS].sum(axis=0)])
+        res.brdf[i].add(np.vstack([cells, per_path[BASE_ROW]]) / res.sensor.projected_solid_angle())
         albedo = cells.sum(axis=1)
         res.albedo[i].add(albedo)
         lost = tally.energy / tally.paths
@@ -254,7 +259,7 @@ def memory_estimate(plan: Plan, sensor: Sensor, workers: int) -> int:
     batch of path rows or the chunk tallies of a wave, and its unit's tally; the main process
     sums into per-incidence estimates and buffers the tallies of units that arrive early (up to
     all but one worker's share)."""
-    tally = ORDERS * sensor.n_cells * 8
+    tally = TALLY_ROWS * sensor.n_cells * 8
     if plan.backend == "embreex":
         paths = min(plan.paths_per_realization, wavefront.BATCH_PATHS) * PATH_ROW_BYTES
     else:
@@ -262,7 +267,7 @@ def memory_estimate(plan: Plan, sensor: Sensor, workers: int) -> int:
     tracing = plan.generator.scene_bytes(plan.scene) + paths + 2 * tally
     units = len(plan.units)
     processes = len(split(plan.units, max(1, workers)))
-    reducing = 3 * plan.n_incidences * (ORDERS + 1) * sensor.n_cells * 8 + units * tally * (processes - 1) // processes
+    reducing = 3 * plan.n_incidences * (ORDERS + 2) * sensor.n_cells * 8 + units * tally * (processes - 1) // processes
     workers_bytes = WORKER_BYTES * processes if processes > 1 else 0
     return PROCESS_BYTES + workers_bytes + tracing * processes + reducing
 

@@ -57,6 +57,7 @@ class SceneArrays(NamedTuple):
     tile: float
     z_top: float
     z_bottom: float
+    base_material: int  # the base plane's material index (its order-1 exits are tallied apart), -1: none
 
 
 @dataclass
@@ -64,6 +65,11 @@ class Scene:
     """One realization of a microgeometry, ready to trace: triangles and native spheres.
 
     Primitives are numbered triangles first, then spheres; ``prim_shape`` gives each one's shape.
+    Native spheres are given in the frame where x is scaled by ``sphere_scale[0]`` and y by
+    ``sphere_scale[1]``: with a scale other than (1, 1) they stand for the ellipsoids that the
+    map takes onto them (micrograins: the grains' unit space), and their shapes are those
+    ellipsoids. Embree traces them through an instance that maps that frame back (the ray
+    parameter t is the same in both frames).
     """
 
     vertices: np.ndarray  # (V, 3) float32
@@ -78,6 +84,8 @@ class Scene:
     info: dict = field(default_factory=dict)
     spheres: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), np.float32))  # (K, 4) x, y, z, r
     sphere_shape: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))  # (K,) int32
+    sphere_scale: tuple = (1.0, 1.0)
+    base_material: int = -1
 
     def __post_init__(self):
         self.vertices = np.ascontiguousarray(self.vertices, dtype=np.float32)
@@ -101,7 +109,7 @@ class Scene:
     def arrays(self) -> SceneArrays:
         s = self.shapes
         return SceneArrays(self.prim_shape, s.code, s.params, s.material, s.size, self.materials.code,
-                           self.materials.params, self.tile, self.z_top, self.z_bottom)
+                           self.materials.params, self.tile, self.z_top, self.z_bottom, self.base_material)
 
 
 class SceneBuilder:
@@ -115,6 +123,8 @@ class SceneBuilder:
         self.tile = tile
         self.vertices, self.faces, self.face_shape, self.shapes, self.materials = [], [], [], [], []
         self.spheres, self.sphere_shape = [], []
+        self.sphere_scale = (1.0, 1.0)
+        self.base_material = -1
         self.n_vertices = self.n_shapes = 0
 
     def add(self, vertices, faces, face_shape, shapes: Shapes, material: Material) -> None:
@@ -132,6 +142,20 @@ class SceneBuilder:
         self.sphere_shape.append(np.arange(n, dtype=np.int32) + self.n_shapes)
         self._add_shapes(Shapes.spheres(centres, radius, radius), material)
 
+    def add_ellipsoids(self, centres, semi_axes, material: Material) -> None:
+        """Exact axis-aligned ellipsoids of one shape (semi-axes a, b, c), traced as Embree's native
+        spheres of radius c in the frame scaled by (c / a, c / b) in x and y (see :class:`Scene`)."""
+        a, b, c = semi_axes
+        scale = (c / a, c / b)
+        if self.spheres and scale != self.sphere_scale:
+            raise ValueError("the native spheres of a scene share one frame: one ellipsoid shape per scene")
+        self.sphere_scale = scale
+        n = len(centres)
+        scaled = np.asarray(centres, np.float64) * np.array([scale[0], scale[1], 1.0])
+        self.spheres.append(np.column_stack([scaled, np.full(n, c)]))
+        self.sphere_shape.append(np.arange(n, dtype=np.int32) + self.n_shapes)
+        self._add_shapes(Shapes.ellipsoids(centres, np.tile([a, b, c], (n, 1)), 1.0), material)
+
     def _add_shapes(self, shapes: Shapes, material: Material) -> None:
         self.shapes.append(dataclasses.replace(shapes, material=np.full(len(shapes), len(self.materials), np.int32)))
         self.materials.append(material)
@@ -143,6 +167,7 @@ class SceneBuilder:
         vertices = np.array([[lo, lo, z], [hi, lo, z], [hi, hi, z], [lo, hi, z]], dtype=np.float32)
         faces = np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int32)
         plane = Shapes.planes(np.array([[0.0, 0.0, z]]), np.array([[0.0, 0.0, 1.0]]), size=self.tile)
+        self.base_material = len(self.materials)
         self.add(vertices, faces, np.zeros(2, np.int32), plane, material)
 
     def build(self, z_top: float, z_bottom: float, info: dict) -> Scene:
@@ -152,4 +177,5 @@ class SceneBuilder:
                      MaterialTable.of(self.materials), self.tile, z_top, z_bottom,
                      dict(info, triangles=int(len(faces))),
                      np.concatenate(self.spheres or [np.zeros((0, 4))]),
-                     np.concatenate(self.sphere_shape or [np.zeros(0, np.int32)]))
+                     np.concatenate(self.sphere_shape or [np.zeros(0, np.int32)]), self.sphere_scale,
+                     self.base_material)

@@ -3,7 +3,8 @@
 A path ``i`` is a row of a :class:`~microsim.integrators.records.Paths` bundle; the kernels
 update it and the batch's :class:`~microsim.integrators.records.Tally` in place:
 
-- :func:`exit_top`: the path leaves the surface; its weight is binned on the sensor, by order;
+- :func:`exit_top`: the path leaves the surface; its weight is binned on the sensor, by order
+  (and order 1 scattered by the base plane apart);
 - :func:`survives_interaction`: after an interaction, the path ends if it has no weight left,
   is truncated at ``MAX_INTERACTIONS`` (its weight reported, never dropped), and plays Russian
   roulette below ``ROULETTE_WEIGHT`` (unbiased: survivors carry ROULETTE_WEIGHT);
@@ -18,7 +19,7 @@ from numba import literal_unroll
 
 from ..rng import uniform
 from ..sensor import cell_index
-from .records import ORDERS, ROULETTE_KILLS, TRUNCATED
+from .records import BASE_ROW, ORDERS, ROULETTE_KILLS, TRUNCATED
 
 #: Russian roulette: a path whose weight falls below this survives with probability weight / ROULETTE_WEIGHT
 ROULETTE_WEIGHT = 0.05
@@ -31,9 +32,13 @@ MAX_IDLE_SEGMENTS = 20_000
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def exit_top(paths, i, d, sensor, tally):
-    """Path i leaves along d: its weight goes to d's sensor cell, in the row of its order."""
+    """Path i leaves along d: its weight goes to d's sensor cell, in the row of its order (and in
+    BASE_ROW too if its one interaction was with the base plane)."""
     cell = cell_index(d, sensor)
-    tally.exit_weight[min(paths.order[i], ORDERS) - 1, cell] += paths.weight[i]
+    order = paths.order[i]
+    tally.exit_weight[min(order, ORDERS) - 1, cell] += paths.weight[i]
+    if order == 1 and paths.from_base[i]:
+        tally.exit_weight[BASE_ROW, cell] += paths.weight[i]
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

@@ -21,7 +21,7 @@ body serves both slots: numba compiles the kernel in 27 s, against 5 s with one 
 with a third copy of the event kernels for the last slot alone.
 
 Memory is one scene per process, a few hundred bytes per path row, and the tallies of one wave
-(WAVE_CHUNKS_PER_THREAD x threads x 4 x cells doubles).
+(WAVE_CHUNKS_PER_THREAD x threads x 5 x cells doubles).
 
 Python threads rather than a numba ``prange``: numba's parallel loops take no tuples of arrays
 (the named bundles), and its OpenMP layer is not fork-safe (the runner forks worker processes
@@ -40,7 +40,7 @@ import numba
 import numpy as np
 
 from .. import embree
-from .records import ORDERS, SEGMENTS, Rays, Tally, allocate_paths, empty_tally
+from .records import SEGMENTS, TALLY_ROWS, Rays, Tally, allocate_paths, empty_tally
 from .surface import follow, prepare_segment, start_path
 
 #: paths of one chunk: traced in order by one thread, into a tally of their own
@@ -64,7 +64,7 @@ def workspace(rows: int, n_cells: int, log_rays: int = 0) -> Workspace:
     records = embree.ray_hits(SLOTS * rows)
     rays = Rays(*embree.ray_views(records), np.zeros(SLOTS * rows, np.int8))  # segments written into the queries
     return Workspace(allocate_paths(SLOTS * rows), rays, records,
-                     np.zeros((rows, ORDERS, n_cells)), np.zeros((rows, len(tally.energy))),
+                     np.zeros((rows, TALLY_ROWS, n_cells)), np.zeros((rows, len(tally.energy))),
                      np.zeros((rows, len(tally.counts)), np.int64), np.zeros((log_rays, 7), np.float32),
                      np.zeros(1, np.int64))
 
@@ -79,7 +79,7 @@ def compile_kernels(beam, scene, sensor) -> None:
     name (without it, loading the code segfaults)."""
     embree.available()
     work = workspace(1, sensor.n_cells)
-    trace_chunks(0, 0, 0, beam, scene.arrays(), embree.SceneHandle(0, np.zeros(1, np.int64)), sensor, work)
+    trace_chunks(0, 0, 0, beam, scene.arrays(), embree.SceneHandle(0, np.zeros(1, np.int64), np.ones(2)), sensor, work)
 
 
 class FusedBackend:
@@ -95,7 +95,7 @@ class FusedBackend:
     def __init__(self, scene, threads: int = 1, log_rays: int = 0):
         if log_rays and threads != 1:
             raise ValueError("the ray log keeps the order of one thread: give threads = 1")
-        self.embree = embree.Scene(scene.vertices, scene.faces, scene.spheres)
+        self.embree = embree.Scene(scene.vertices, scene.faces, scene.spheres, sphere_scale=scene.sphere_scale)
         self.threads, self.log_rays = threads, log_rays
         self.ray_log = np.zeros((0, 7), np.float32)
 
@@ -162,7 +162,7 @@ def event(work, row, number, end, handle, beam, scene, sensor, tally):
     """The path in ``row`` met the hit Embree left in its record: follow it, and prepare its next
     segment, or start path ``number`` in its row if it ended and paths are left. Returns (row
     busy, next path number)."""
-    prim, t, normal = embree.hit_of(handle.prim_offset, work.records, row)
+    prim, t, normal = embree.hit_of(handle, work.records, row)
     alive, o, d = follow(work.paths, work.rays, row, (prim, np.float64(t), normal), scene, sensor, beam.max_order,
                          tally)
     if alive:

@@ -18,6 +18,10 @@ import numpy as np
 
 #: orders tallied separately: 1, 2, 3 and 4+ (CONVENTIONS 2)
 ORDERS = 4
+#: the row of ``Tally.exit_weight`` after the orders: order-1 exits scattered by the base plane
+#: (CONVENTIONS 6, ``brdf_order1_base``); rows 0 .. ORDERS-1 are the orders, all surfaces
+BASE_ROW = ORDERS
+TALLY_ROWS = ORDERS + 1
 
 #: what a path carries from segment to segment: name -> dtype (one row per path)
 PATH_FIELDS = {
@@ -25,6 +29,7 @@ PATH_FIELDS = {
     "order": np.int32,  # interactions so far
     "idle": np.int32,  # segments since the last interaction (side wraps, pass-throughs)
     "rng": np.uint64,  # state of the path's random stream (microsim.rng)
+    "from_base": np.int8,  # 1 if the first interaction was with the scene's base plane
 }
 Paths = namedtuple("Paths", PATH_FIELDS)
 
@@ -37,7 +42,7 @@ Rays = namedtuple("Rays", ["origin", "direction", "tfar", "end"])
 Beam = namedtuple("Beam", ["wi", "key", "n_paths", "max_order"])
 
 #: what a batch of paths produced, sums of weights not yet divided by ``paths``: exits per order
-#: and sensor cell (ORDERS, n_cells), lost energy (ENERGY_NAMES) and event counts (COUNT_NAMES)
+#: and sensor cell, then order 1 from the base alone (TALLY_ROWS, n_cells), lost energy (ENERGY_NAMES) and event counts (COUNT_NAMES)
 Tally = namedtuple("Tally", ["paths", "exit_weight", "energy", "counts"])
 
 #: indices of ``Tally.energy``
@@ -58,5 +63,5 @@ def allocate_rays(n: int) -> Rays:
 
 
 def empty_tally(paths: int, n_cells: int) -> Tally:
-    return Tally(paths, np.zeros((ORDERS, n_cells)), np.zeros(len(ENERGY_NAMES)),
+    return Tally(paths, np.zeros((TALLY_ROWS, n_cells)), np.zeros(len(ENERGY_NAMES)),
                  np.zeros(len(COUNT_NAMES), np.int64))

@@ -114,6 +114,7 @@ def start_path(paths, rays, i, number, beam, scene):
     paths.weight[i] = 1.0
     paths.order[i] = 0
     paths.idle[i] = 0
+    paths.from_base[i] = 0
     prepare_segment(rays, i, (x, y, scene.z_top), (-beam.wi[0], -beam.wi[1], -beam.wi[2]), scene)
 
 
@@ -171,6 +172,8 @@ def interact(paths, i, h, d, s, scene, tally):
     m = scene.shape_material[s]
     d, factor, cut = scatter(scene.material_code[m], scene.material_params[m], paths.rng, i, d, n)
     w = paths.weight[i]
+    if paths.order[i] == 0:
+        paths.from_base[i] = m == scene.base_material
     tally.energy[ABSORBED] += w * (1.0 - factor - cut)
     tally.energy[TRUNCATED] += w * cut
     paths.weight[i] = w * factor

@@ -1,0 +1,196 @@
+"""Micrograin fields (CONVENTIONS 5.3): half-ellipsoid grains on a base plane, a Boolean model.
+
+Grains are the upper halves of ellipsoids of vertical semi-axis 1 and lateral semi-axes
+1/beta_x, 1/beta_y (aligned with x and y), with centres a Poisson process on the base plane z = 0
+of density rho = lambda beta_x beta_y / pi, lambda = -ln(1 - tau0), so that a fraction tau0 of
+the base is covered (papers/micrograin_bsdf_anisotropic.txt, Eq. 8-9; the relations are in
+:mod:`microsim.boolean_model`, shared with the ``micrograin`` model). Grains overlap freely. The
+grains are made of ``[material]``, the plane of ``[base]`` (default: an absorber).
+
+Exact grains (the default). Every grain is the same ellipsoid, so the map (x, y, z) ->
+(beta_x x, beta_y y, z) takes the field onto unit spheres centred on the plane: the grains are
+Embree's native spheres in that frame, traced through an instance that maps it back
+(:class:`microsim.embree.Scene`; the ray parameter t is the same in both frames, and normals go
+back by the inverse transpose). The lower halves of the spheres lie under the base plane, where
+no ray goes. Hit points are projected onto the ellipsoid and shaded with its exact normal
+(:func:`microsim.shapes.surface_point`). ``sphere_model = "exact"``, ``max_mesh_error = 0``.
+
+Tessellated grains (``subdivisions`` or ``mesh_error``, and on the embreex backend, which traces
+triangles only). Each grain is an icosphere of the level whose largest distance to the unit
+sphere is within ``mesh_error`` (0.01 on embreex), measured in the grain's own frame, where the
+grain is the unit sphere whatever beta: so the budget means the same for very flat (beta = 0.05)
+and very tall (beta = 5) grains, in units of the local semi-axes. The icosphere is scaled by
+(1/beta_x, 1/beta_y, 1); only its faces that reach above the base are kept. Hit points are
+projected onto the ellipsoid of the mesh's vertex radius, as for meshed spheres.
+
+Tile. A square of side L, periodic in x and y. The default is
+L = max(tan(theta_max) + tan(GRAZING_DEG) + 4 a, FOOTPRINTS x 2 a), a = max(1/beta_x, 1/beta_y)
+the largest lateral semi-axis and theta_max the largest incidence of the run (at least
+GRAZING_DEG = 86 deg). A ray entering the layer (z <= 1) at theta_i travels at most
+tan(theta_i) horizontally before it reaches the base, and one leaving at theta_o at most
+tan(theta_o): with L above their sum plus a grain width at each end, no single-scattering path
+up to theta_o = 86 deg can meet the periodic image of a grain that shadows its incoming ray
+("ghost" shadow hiding, which a small tile brings at grazing angles, as measured for the
+sphere tile). The footprint term keeps FOOTPRINTS grain widths in a tile of very flat grains.
+Every value used is recorded in the table's scene/ attrs; ``benchmarks/micrograins.py`` charts
+the grazing case against the tile.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+import numpy as np
+import pydantic
+from pydantic import Field
+
+from microsim.boolean_model import grain_density, grain_extinction
+from microsim.materials import Absorber
+from microsim.scene import Scene, SceneBuilder
+from microsim.schema import Section
+from microsim.shapes import Shapes
+
+from .poisson_spheres import EXACT_SPHERE_BYTES, FALLBACK_MESH_ERROR, MAX_SUBDIVISIONS, TRIANGLE_BYTES, \
+    level_for, periodic_images, unit_icosphere
+
+KIND = "micrograins"
+INTEGRATOR = "surface"
+#: the tile keeps single-scattering paths up to this angle from meeting periodic images
+GRAZING_DEG = 86.0
+#: the tile holds at least this many grain widths
+FOOTPRINTS = 16.0
+BETA_RANGE = (0.01, 20.0)
+#: the slab's top lies this far above the grain tips; its bottom this far under the base
+SLAB_MARGIN = 1e-3
+#: an icosphere face is kept if a vertex lies above this height (unit frame)
+KEEP_ABOVE = -1e-9
+
+
+class Config(Section):
+    kind: Literal["micrograins"]
+    tau0: float = Field(gt=0.0, le=0.999, description="fraction of the base covered by grains (Eq. 8)")
+    beta: float | None = Field(None, ge=BETA_RANGE[0], le=BETA_RANGE[1],
+                               description="grain height / lateral semi-axis (sets beta_x = beta_y)")
+    beta_x: float | None = Field(None, ge=BETA_RANGE[0], le=BETA_RANGE[1], description="height / semi-axis along x")
+    beta_y: float | None = Field(None, ge=BETA_RANGE[0], le=BETA_RANGE[1], description="height / semi-axis along y")
+    tile: float | None = Field(None, ge=1.0, le=1e4, description="tile period, in grain heights")
+    subdivisions: int | None = Field(None, ge=0, le=MAX_SUBDIVISIONS, description="icosphere level of each grain")
+    mesh_error: float | None = Field(None, gt=0.0, le=0.5,
+                                     description="largest mesh-to-grain distance, in the grain's own frame")
+
+    @pydantic.model_validator(mode="after")
+    def _one_beta(self):
+        given = [key for key in ("beta_x", "beta_y") if getattr(self, key) is not None]
+        if self.beta is not None and given:
+            raise ValueError(f"scene.beta: give either beta or beta_x + beta_y, not both (got beta and {given[0]})")
+        if self.beta is None and len(given) != 2:
+            raise ValueError("scene.beta: missing; give beta, or beta_x and beta_y, each in "
+                             f"[{BETA_RANGE[0]:g}, {BETA_RANGE[1]:g}]")
+        return self
+
+    @property
+    def betas(self) -> tuple[float, float]:
+        return (self.beta, self.beta) if self.beta is not None else (self.beta_x, self.beta_y)
+
+
+def check(config) -> None:
+    scene = config.scene
+    if scene.subdivisions is not None and scene.mesh_error is not None:
+        raise ValueError("scene.mesh_error: give either subdivisions or mesh_error, not both")
+
+
+def is_exact(scene) -> bool:
+    return scene.subdivisions is None and scene.mesh_error is None
+
+
+def for_backend(config, backend: str):
+    """(config, note): exact grains are native spheres in a scaled frame, which the embreex
+    backend cannot trace: there they become icospheres within FALLBACK_MESH_ERROR."""
+    if backend == "embreex" and is_exact(config.scene):
+        meshed = config.scene.model_copy(update={"mesh_error": FALLBACK_MESH_ERROR})
+        return (config.model_copy(update={"scene": meshed}),
+                f"exact grains traced as icospheres within mesh_error {FALLBACK_MESH_ERROR} (embreex traces triangles)")
+    return config, ""
+
+
+def default_tile(beta_x: float, beta_y: float, theta_max_deg: float) -> float:
+    """The default tile side (see the module doc)."""
+    a = max(1.0 / beta_x, 1.0 / beta_y)
+    reach = math.tan(math.radians(max(theta_max_deg, GRAZING_DEG))) + math.tan(math.radians(GRAZING_DEG))
+    return max(reach + 4.0 * a, FOOTPRINTS * 2.0 * a)
+
+
+def resolve(config) -> dict:
+    scene = config.scene
+    beta_x, beta_y = scene.betas
+    theta_max = max(config.illumination.theta_i_deg)
+    tile = scene.tile if scene.tile is not None else default_tile(beta_x, beta_y, theta_max)
+    if is_exact(scene):
+        model = {"grain_model": "exact", "triangles_per_grain": 0, "vertex_radius": 1.0, "max_mesh_error": 0.0}
+    else:
+        level = scene.subdivisions if scene.subdivisions is not None else level_for(scene.mesh_error)
+        vertices, faces, vertex_radius, error = unit_icosphere(level)
+        model = {"grain_model": "icosphere", "subdivisions": level, "triangles_per_grain": len(_upper_faces(level)),
+                 "vertex_radius": vertex_radius, "max_mesh_error": error}
+    rho = grain_density(scene.tau0, beta_x, beta_y)
+    return {
+        "kind": KIND,
+        "tau0": scene.tau0,
+        "beta_x": beta_x,
+        "beta_y": beta_y,
+        "grain_extinction": grain_extinction(scene.tau0),
+        "grain_density": rho,
+        "tile": tile,
+        "tile_default": scene.tile is None,
+        "tile_grazing_deg": max(theta_max, GRAZING_DEG),
+        **model,
+        "expected_grains": rho * tile * tile,
+        "base": config.base.kind if config.base is not None else "absorber",
+        "z_top": model["vertex_radius"] + SLAB_MARGIN,
+        "z_bottom": -SLAB_MARGIN,
+    }
+
+
+def scene_bytes(resolved: dict) -> int:
+    """Expected grains and their images (6 standard deviations of Poisson spread) times their size."""
+    a = max(1.0 / resolved["beta_x"], 1.0 / resolved["beta_y"]) * resolved["vertex_radius"]
+    n = resolved["grain_density"] * (resolved["tile"] + 2.0 * a) ** 2
+    grains = n + 6.0 * math.sqrt(n) + 1.0
+    return int(grains * (resolved["triangles_per_grain"] * TRIANGLE_BYTES or EXACT_SPHERE_BYTES))
+
+
+def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
+    tile = resolved["tile"]
+    beta_x, beta_y = resolved["beta_x"], resolved["beta_y"]
+    count = rng.poisson(resolved["grain_density"] * tile * tile)
+    centres = np.column_stack([rng.uniform(0.0, tile, size=(count, 2)), np.zeros(count)])
+    reach = max(1.0 / beta_x, 1.0 / beta_y) * resolved["vertex_radius"]
+    all_centres, _ = periodic_images(centres, tile, reach)
+    builder = SceneBuilder(tile)
+    semi_axes = (1.0 / beta_x, 1.0 / beta_y, 1.0)
+    if resolved["grain_model"] == "exact":
+        builder.add_ellipsoids(all_centres, semi_axes, config.material)
+    else:
+        add_meshed_grains(builder, all_centres, semi_axes, resolved["subdivisions"], config.material)
+    builder.add_base_plane(0.0, config.base if config.base is not None else Absorber(kind="absorber"))
+    info = dict(resolved, grains=int(count), grain_images=int(len(all_centres) - count))
+    return builder.build(resolved["z_top"], resolved["z_bottom"], info)
+
+
+def _upper_faces(level: int) -> np.ndarray:
+    """The faces of the level's icosphere that reach above the base plane."""
+    vertices, faces, _, _ = unit_icosphere(level)
+    return faces[(vertices[faces][:, :, 2] > KEEP_ABOVE).any(axis=1)]
+
+
+def add_meshed_grains(builder: SceneBuilder, centres, semi_axes, level: int, material) -> None:
+    """Upper halves of icospheres scaled by ``semi_axes`` about ``centres``, shaded as ellipsoids."""
+    vertices0, _, vertex_radius, _ = unit_icosphere(level)
+    faces0 = _upper_faces(level)
+    n = len(centres)
+    vertices = vertices0[None, :, :] * np.asarray(semi_axes)[None, None, :] + centres[:, None, :]
+    faces = faces0[None, :, :] + (np.arange(n) * len(vertices0))[:, None, None]
+    face_shape = np.repeat(np.arange(n, dtype=np.int32), len(faces0))
+    builder.add(vertices.reshape(-1, 3), faces.reshape(-1, 3), face_shape,
+                Shapes.ellipsoids(centres, np.tile(semi_axes, (n, 1)), vertex_radius), material)
