@@ -199,16 +199,14 @@ def list_models():
     from . import models
 
     classes = [models.get(name) for name in models.available()]
-    rows = [(p.name, p.describe(), "no default" if p.default is None else f"default {p.default}")
-            for cls in classes for p in cls.params]
+    rows = [(p.name, p.describe(), p.default_text()) for cls in classes for p in cls.params]
     widths = [max(len(row[k]) for row in rows) for k in range(3)]
     for name, cls in zip(models.available(), classes):
         click.echo(f"{name}: {cls.reference}")
         if not cls.reciprocal:
             click.echo(f"    (not reciprocal: {cls.nonreciprocal_reason})")
         for p in cls.params:
-            default = "no default" if p.default is None else f"default {p.default}"
-            cells = (p.name, p.describe(), default)
+            cells = (p.name, p.describe(), p.default_text())
             click.echo("    " + "  ".join(f"{c:<{w}}" for c, w in zip(cells, widths)) + f"  {p.doc}")
 
 

@@ -23,7 +23,8 @@ from microsim.boolean_model import (
     unit_space_height,
     unit_space_height_array,
 )
-from microsim.fresnel import fresnel_array
+from microsim.cli import main
+from microsim.fresnel import fresnel_array, fresnel_conductor_array
 from microsim.models import micrograin_geometry as geo
 from microsim.frames import direction
 from microsim.models.quadrature import directional_albedo
@@ -440,9 +441,10 @@ def test_directional_albedo_at_most_one(params):
 
 
 @pytest.mark.parametrize("name", ["micrograin", "micrograin_smith"])
-def test_directional_albedo_of_mirror_grains_at_most_one(name):
-    """Near-perfect conductor grains on a white base; a dense rule resolves the specular lobe."""
-    model = models.create(name, tau0=0.5, beta=0.3, albedo=0.0, eta=1e3, k=1e3, bulk="lambert", bulk_albedo=1.0)
+@pytest.mark.parametrize("grains", [dict(albedo=0.0, eta=1e3, k=1e3), dict(material="mirror")])
+def test_directional_albedo_of_mirror_grains_at_most_one(name, grains):
+    """Near-perfect conductor and mirror grains on a white base; a dense rule resolves the specular lobe."""
+    model = models.create(name, tau0=0.5, beta=0.3, **grains, bulk="lambert", bulk_albedo=1.0)
     wi = direction(np.radians([0.0, 60.0, 85.0]), 0.0)
     coarse = directional_albedo(model, wi, 96, 192)
     fine = directional_albedo(model, wi, 192, 384)
@@ -587,3 +589,135 @@ def test_beta_alias():
     rng = np.random.default_rng(1)
     wi, wo = random_directions(rng, 20), random_directions(rng, 20)
     assert np.array_equal(iso(wi, wo), explicit(wi, wo))
+
+
+# ---------------------------------------------------------------- parameters named as in the scene config
+
+COPPER = dict(eta=1.0152, k=6.6273)
+OLD_AND_NEW = [  # (old form, the same in the names of the run config)
+    (dict(albedo=0.8, bulk="lambert", bulk_albedo=0.6),
+     dict(material="lambert", albedo=0.8, base="lambert", base_albedo=0.6)),
+    (dict(albedo=0.8, eta=1.0, k=0.0, bulk="absorber"), dict(material="lambert", albedo=0.8, base="absorber")),
+    (dict(albedo=0.0, **COPPER, bulk="lambert", bulk_albedo=0.3),
+     dict(material="conductor", **COPPER, base="lambert", base_albedo=0.3)),
+    (dict(albedo=0.0, **COPPER), dict(material="conductor", **COPPER)),
+    (dict(**COPPER), dict(material="conductor", **COPPER)),
+    (dict(albedo=0.6, eta=1.5, bulk="lambert", bulk_albedo=0.6),
+     dict(material="interfaced_lambert", albedo=0.6, eta=1.5, base="lambert", base_albedo=0.6)),
+    (dict(albedo=0.6, eta=1.5, k=0.0), dict(material="interfaced_lambert", albedo=0.6, eta=1.5, k=0.0)),
+    (dict(albedo=0.6, eta=1.5, bulk_albedo=0.0), dict(material="interfaced_lambert", albedo=0.6, eta=1.5)),
+]
+
+
+@pytest.mark.parametrize("name", ["micrograin", "micrograin_smith"])
+@pytest.mark.parametrize("shape", [dict(beta=0.8), dict(beta_x=0.5, beta_y=2.0)])
+@pytest.mark.parametrize("old, new", OLD_AND_NEW)
+def test_config_names_equal_the_old_names(name, shape, old, new):
+    """The names of the run config and the old ones give the same resolved parameters and the
+    same values, bit for bit; mixing an old grain form with the new base names too."""
+    rng = np.random.default_rng(21)
+    wi, wo = random_directions(rng, 300), random_directions(rng, 300)
+    a = models.create(name, tau0=0.45, **shape, **old)
+    b = models.create(name, tau0=0.45, **shape, **new)
+    assert a.values == b.values
+    assert np.array_equal(a(wi, wo), b(wi, wo))
+    grains_old = {key: v for key, v in old.items() if not key.startswith("bulk")}
+    base_new = {key: v for key, v in new.items() if key.startswith("base")}
+    mixed = models.create(name, tau0=0.45, **shape, **grains_old, **base_new)
+    assert mixed.values == b.values
+    assert np.array_equal(mixed(wi, wo), b(wi, wo))
+
+
+def test_resolved_values_mirror_the_config():
+    conductor = models.create("micrograin", tau0=0.4, beta=1.0, material="conductor", **COPPER)
+    assert (conductor.albedo, conductor.eta, conductor.k, conductor.base, conductor.base_albedo) == (
+        0.0, 1.0152, 6.6273, "absorber", 0.0)
+    mirror = models.create("micrograin", tau0=0.4, beta=1.0, material="mirror", base="lambert", base_albedo=0.5)
+    assert (mirror.albedo, mirror.eta, mirror.k, mirror.bulk, mirror.bulk_albedo) == (0.0, None, None, "lambert", 0.5)
+    old = models.create("micrograin", tau0=0.4, beta=1.0, albedo=0.7, eta=1.3)
+    assert (old.material, old.albedo, old.eta, old.k) == ("interfaced_lambert", 0.7, 1.3, 0.0)
+    # what `microsim compare --param KEY=VALUE` passes: strings
+    cli = models.create("micrograin_smith", tau0="0.4", beta="1", material="mirror", base="lambert", base_albedo="0.5")
+    assert cli.values == models.create("micrograin_smith", tau0=0.4, beta=1.0, material="mirror", bulk="lambert",
+                                       bulk_albedo=0.5).values
+
+
+@pytest.mark.parametrize("name", ["micrograin", "micrograin_smith"])
+def test_mirror_grains_are_conductor_grains_with_f_one(name):
+    """Absorbing base: both models are a sum of terms proportional to F(i.h) for conductor grains,
+    so mirror grains give the conductor's values divided by its F (rounding only); and a conductor
+    of huge k, whose 1 - F is below 1 - F_min at every angle, lies within that of the mirror."""
+    rng = np.random.default_rng(8)
+    wi, wo = random_directions(rng, 300, mu_min=0.02), random_directions(rng, 300, mu_min=0.02)
+    hv = (wi + wo) / np.linalg.norm(wi + wo, axis=-1, keepdims=True)
+    cos_d = np.sum(wi * hv, axis=-1)
+    shape = dict(tau0=0.5, beta_x=0.6, beta_y=1.4)
+    mirror = models.create(name, **shape, material="mirror")(wi, wo)
+    conductor = models.create(name, **shape, material="conductor", **COPPER)(wi, wo)
+    assert np.all(mirror > 0.0)
+    np.testing.assert_allclose(conductor / fresnel_conductor_array(cos_d, *COPPER.values()), mirror, rtol=1e-13)
+
+    base = dict(base="lambert", base_albedo=0.7)
+    mirror = models.create(name, **shape, material="mirror", **base)(wi, wo)
+    near = models.create(name, **shape, material="conductor", eta=1.0, k=1e4, **base)(wi, wo)
+    f_min = float(np.min(fresnel_conductor_array(np.linspace(0.0, 1.0, 1001), 1.0, 1e4)))
+    assert 0.0 < 1.0 - f_min < 1e-3
+    assert np.all(near <= mirror)
+    assert np.all(mirror - near <= (1.0 - f_min) * mirror)
+
+
+@pytest.mark.parametrize("name", ["micrograin", "micrograin_smith"])
+@pytest.mark.parametrize("bad, keys", [
+    (dict(material="conductor", albedo=0.5, **COPPER), ["albedo"]),
+    (dict(material="conductor", albedo=0.0, **COPPER), ["albedo"]),
+    (dict(material="conductor", eta=1.5), ["k"]),
+    (dict(material="conductor", k=2.0), ["eta"]),
+    (dict(material="mirror", eta=1.5), ["eta"]),
+    (dict(material="mirror", albedo=0.5), ["albedo"]),
+    (dict(material="lambert", albedo=0.5, eta=1.5), ["eta"]),
+    (dict(material="lambert", albedo=0.5, k=0.0), ["k"]),
+    (dict(material="lambert"), ["albedo"]),
+    (dict(material="interfaced_lambert", albedo=0.5), ["eta"]),
+    (dict(material="interfaced_lambert", eta=1.5), ["albedo"]),
+    (dict(material="interfaced_lambert", albedo=0.5, eta=1.5, k=1.0), ["k"]),
+    (dict(material="plastic", albedo=0.5), ["material"]),
+    (dict(albedo=0.5, base="absorber", base_albedo=0.3), ["base_albedo"]),
+    (dict(albedo=0.5, base_albedo=0.0), ["base_albedo"]),
+    (dict(albedo=0.5, base="lambert"), ["base_albedo"]),
+    (dict(albedo=0.5, base="mirror"), ["base"]),
+    (dict(albedo=0.5, base_albedo=1.5), ["base_albedo"]),
+    (dict(albedo=0.5, bulk="lambert", base="lambert", base_albedo=0.5), ["bulk", "base"]),
+    (dict(albedo=0.5, base="lambert", bulk_albedo=0.5, base_albedo=0.5), ["bulk_albedo", "base_albedo"]),
+])
+def test_bad_config_names_raise_one_line(name, bad, keys):
+    assert_rejected(name, dict(tau0=0.5, beta=1.0, **bad), keys)
+    with pytest.raises(ValueError) as err:
+        models.create(name, tau0=0.5, beta=1.0, **bad)
+    assert "\n" not in str(err.value)
+
+
+def test_compare_takes_the_config_names(tmp_path, capsys):
+    """`microsim compare --param` passes the names through: a bad combination is one line naming
+    the key (exit 2); a good one gets as far as the table."""
+    params = ["--param", "tau0=0.4", "--param", "beta=1", "--param", "material=conductor"]
+    missing = str(tmp_path / "missing.h5")
+    assert main(["compare", missing, "--model", "micrograin", *params, "--param", "albedo=0.5"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "albedo" in lines[0] and "conductor" in lines[0]
+    good = params + ["--param", "eta=1.0152", "--param", "k=6.6273", "--param", "base=lambert",
+                     "--param", "base_albedo=0.5"]
+    assert main(["compare", missing, "--model", "micrograin", *good]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "TABLE.h5" in lines[0] and "not found" in lines[0]
+
+
+def test_models_listing_shows_optional_keys_and_aliases(capsys):
+    assert main(["models"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    start = next(j for j, line in enumerate(out) if line.startswith("micrograin:"))
+    end = next(j for j in range(start + 1, len(out)) if not out[j].startswith("    "))
+    rows = {line.split()[0]: line for line in out[start + 1:end]}
+    for key in ("material", "albedo", "eta", "k", "base_albedo", "bulk", "bulk_albedo"):
+        assert "optional" in rows[key], rows[key]
+    assert "default absorber" in rows["base"]
+    assert "old name of base" in rows["bulk"] and "old name of base_albedo" in rows["bulk_albedo"]

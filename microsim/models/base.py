@@ -20,7 +20,10 @@ class Param:
 
     A numeric parameter lies in [lo, hi] (open ends when ``lo_open`` / ``hi_open``); a choice
     parameter takes one of ``choices``. ``default=None`` means the parameter is required
-    (unless the model's :meth:`BRDFModel.resolve` derives it from another one).
+    (unless the model's :meth:`BRDFModel.resolve` derives it from another one), or, with
+    ``optional=True``, that it may be left out: a key that only some settings take (a grain
+    material's ``eta``), which ``resolve`` then requires, refuses or fills; left out and not
+    filled, its value is None.
     """
 
     name: str
@@ -31,6 +34,13 @@ class Param:
     lo_open: bool = False
     hi_open: bool = False
     choices: tuple[str, ...] | None = None
+    optional: bool = False
+
+    def default_text(self) -> str:
+        """The default as shown by ``microsim models``."""
+        if self.default is not None:
+            return f"default {self.default}"
+        return "optional" if self.optional else "no default"
 
     def describe(self) -> str:
         """The accepted values, as shown in error messages and ``microsim models``."""
@@ -86,7 +96,7 @@ class BRDFModel:
         checked = self.resolve(checked)
         for p in self.params:
             if p.name not in checked:
-                if p.default is None:
+                if p.default is None and not p.optional:
                     raise ValueError(f"model {self.name!r} needs parameter {p.name} in {p.describe()}")
                 checked[p.name] = p.default
         self.values = checked

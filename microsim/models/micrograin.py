@@ -12,10 +12,18 @@ pore visibility V_p = (1 - tau0) G^dist(i, o, 0) (Eq. 23) and the diffuse grain 
     f^S,d = K_d / pi * integral (i.m)+ (o.m)+ / (mu_i mu_o) D(m) G(i, o, m) T(i, o, m) dm,
     T = (1 - F(i.m)) (1 - F(o.m)).
 
-For Lambertian or conductor grains each term is the exact single-scattering contribution of
-the grain layer of CONVENTIONS 5.3 (a dielectric coat adds the paper's T, which omits the
-internal reflections): the model is reciprocal (G^dist depends on the union of the two shadows
-only, T and F(i.h) are symmetric) and its albedo is <= 1.
+For ``lambert``, ``conductor`` and ``mirror`` grains each term is the exact single-scattering
+contribution of the grain layer of CONVENTIONS 5.3. ``interfaced_lambert`` grains are not exact:
+the model's T = (1 - F(i.m)) (1 - F(o.m)) (Eq. 21-22) crosses the coat once each way and omits
+the internal reflections (the paper says so in Sec. 7), whereas the scenes' interfaced_lambert
+material follows every bounce under the interface (Fresnel and total internal reflection from
+inside, :mod:`microsim.materials`). On a flat facet the two body terms differ by the factor
+1 / (eta^2 (1 - K_d r_i)) of the exact one (interfaced_lambertian_microfacets.txt, Eq. 8-10;
+:mod:`microsim.models.interfaced_lambert`): 1 at eta = 1, otherwise above 1 for white bodies
+(1 / (1 - r_e) at K_d = 1) and below it for dark ones (-> 1 / eta^2), so a comparison of such
+grains with a simulation measures this approximation as well. In every case the model is
+reciprocal (G^dist depends on the union of the two shadows only, T and F(i.h) are symmetric)
+and its albedo is <= 1.
 
 Eq. 21 is evaluated by fixed Gauss rules (the paper uses Monte Carlo). With the covered-area
 measure D(m)(m.n) dm = p(h') dh' dphi' / (2 pi) in unit space (h' = m'.z, uniform phi'), where
@@ -30,13 +38,27 @@ move continuously with the directions, so the model is a smooth function of them
 against 4x finer rules: relative error <= 1e-5 (isotropic), <= 2e-4 (beta_x / beta_y = 1/40),
 median ~1e-7.
 
-Grain material: ``albedo`` is K_d, the albedo of the Lambertian grain surface. ``eta`` and ``k``
-give an optional smooth interface on the grains: ``eta = 1, k = 0`` (the defaults) means no
-interface, F = 0 and T = 1, purely Lambertian grains (the ``lambert`` material of the scenes);
-``eta != 1, k = 0`` a dielectric coat over the Lambertian grain (Eq. 21-22; T neglects the
-internal reflections, as the paper says in Sec. 7); ``k > 0`` a conductor, which is opaque, so
-``albedo`` must then be 0. Base: ``bulk = "absorber"`` (f^B = 0) or ``"lambert"``
-(f^B = bulk_albedo / pi).
+Parameters mirror the run config of a micrograin scene (CONVENTIONS 4), so that
+``microsim compare --param`` takes the names of the scene's TOML: ``material`` is the grains'
+``[material] kind`` and takes that kind's keys, no others; ``base`` is the ``[base] kind`` and
+``base_albedo`` its ``albedo``:
+
+- ``lambert``: ``albedo`` = K_d of the grain surface; F = 0, T = 1, no specular term.
+- ``conductor``: ``eta`` and ``k`` (k >= 0), the complex index; opaque, so no diffuse term; F is
+  the exact conductor reflectance, as in the tracer (also for k = 0).
+- ``mirror``: the perfect conductor, F = 1 at every angle (a flag in the kernel); no keys, no
+  diffuse term.
+- ``interfaced_lambert``: ``albedo`` (K_d of the body) and ``eta`` (a dielectric; k is 0 or left
+  out): the diffuse term with T and the specular term with the dielectric F.
+- base ``absorber`` (f^B = 0, no ``base_albedo``) or ``lambert`` (f^B = base_albedo / pi).
+
+Old names stay as aliases: ``bulk`` for ``base``, ``bulk_albedo`` for ``base_albedo`` (giving a
+name and its alias is an error). Without ``material`` the old grain description holds, the
+material following from ``eta`` and ``k`` (defaults 1 and 0): ``eta = 1, k = 0`` lambert,
+``eta != 1, k = 0`` a dielectric coat over Lambertian grains (interfaced_lambert), ``k > 0`` a
+conductor (``albedo`` left out or 0). Old and new names give identical values; the old forms
+keep their old leniency (``albedo = 0`` with a conductor, ``bulk_albedo = 0`` with an absorbing
+base), the new ones are as strict as a config.
 """
 
 from __future__ import annotations
@@ -47,7 +69,8 @@ import numba
 import numpy as np
 
 from ..boolean_model import grain_extinction, unit_space_direction, unit_space_height
-from ..fresnel import fresnel
+from ..fresnel import fresnel, fresnel_conductor, fresnel_dielectric
+from ..materials import CONDUCTOR, INTERFACED_LAMBERT, LAMBERT, MIRROR
 from .base import BRDFModel, Param, register
 from .micrograin_geometry import end_graded_gauss_rule, ndf_value, shadowed_area
 
@@ -64,12 +87,33 @@ GAF = Param("gaf", "distant GAF: direction-correlated (Eq. 18) or not (Eq. 17), 
             choices=("correlated", "uncorrelated"))
 _BETA = Param("beta", "grain height / lateral semi-axis, isotropic (sets beta_x = beta_y)", None, *BETA_RANGE)
 
+#: Grain material -> the keys it takes besides ``material``: those of its ``[material]`` table
+#: (CONVENTIONS 4). The kind codes are the tracer's (:mod:`microsim.materials`).
+GRAIN_KEYS = {"lambert": ("albedo",), "conductor": ("eta", "k"), "mirror": (), "interfaced_lambert": ("albedo", "eta")}
+GRAIN_CODES = {"lambert": LAMBERT, "conductor": CONDUCTOR, "mirror": MIRROR, "interfaced_lambert": INTERFACED_LAMBERT}
+#: Values of the grain keys a material does not take, after resolution (no interface: eta 1, k 0;
+#: no Lambertian surface: albedo 0; mirror grains have no finite index: None).
+GRAIN_FILL = {
+    "lambert": {"eta": 1.0, "k": 0.0},
+    "conductor": {"albedo": 0.0},
+    "mirror": {"albedo": 0.0, "eta": None, "k": None},
+    "interfaced_lambert": {"k": 0.0},
+}
+BASES = ("absorber", "lambert")
+#: Old parameter name -> the name that mirrors the config.
+ALIASES = {"bulk": "base", "bulk_albedo": "base_albedo"}
+
 
 class MicrograinParams(BRDFModel):
     """Parameters shared by ``micrograin`` and ``micrograin_smith`` (not a registered model).
 
     A model class adds its own choice of GAF, ``class Model(MicrograinParams, gaf=Param("gaf", ...))``,
     after the shared parameters.
+
+    Grain and base parameters follow the scene config (module docstring). After resolution
+    ``values`` holds every key: a grain key the material does not take holds the value that
+    means "none" (``GRAIN_FILL``), ``base_albedo`` is 0 for an absorbing base, and the old
+    names ``bulk``, ``bulk_albedo`` repeat ``base``, ``base_albedo``.
 
     tau0 in [1e-4, 0.9999]: at tau0 = 0 the model is its bulk and 0/0 appears in
     lambda / tau0; at tau0 = 1 lambda = -ln(1 - tau0) is infinite (no pores, grains touching
@@ -84,12 +128,19 @@ class MicrograinParams(BRDFModel):
         _BETA,
         Param("beta_x", "grain height / lateral semi-axis along x", None, *BETA_RANGE),
         Param("beta_y", "grain height / lateral semi-axis along y", None, *BETA_RANGE),
-        Param("albedo", "K_d, albedo of the Lambertian grain surface (0 for conductor grains)", None, 0.0, 1.0),
-        Param("eta", "refractive index ratio of the grain interface (1 with k = 0: none)", 1.0, 0.0, math.inf,
-              lo_open=True),
-        Param("k", "extinction coefficient of the grain interface (> 0: conductor grains)", 0.0, 0.0, math.inf),
-        Param("bulk", "base plane under the grains", "absorber", choices=("absorber", "lambert")),
-        Param("bulk_albedo", "albedo of the Lambertian base (bulk = lambert only)", None, 0.0, 1.0),
+        Param("material", "grains, as [material] kind (left out: from eta and k, the old form)", None,
+              choices=tuple(GRAIN_KEYS), optional=True),
+        Param("albedo", "K_d of the Lambertian grain surface: lambert, interfaced_lambert need it, others refuse it",
+              None, 0.0, 1.0, optional=True),
+        Param("eta", "real part of the grains' index ratio: conductor, interfaced_lambert need it", None, 0.0,
+              math.inf, lo_open=True, optional=True),
+        Param("k", "imaginary part of the grains' index: conductor needs it (interfaced_lambert: 0 or left out)",
+              None, 0.0, math.inf, optional=True),
+        Param("base", "plane under the grains, as [base] kind", "absorber", choices=BASES),
+        Param("base_albedo", "albedo of the Lambertian base: base = lambert needs it, absorber refuses it", None,
+              0.0, 1.0, optional=True),
+        Param("bulk", "old name of base (an alias)", None, choices=BASES, optional=True),
+        Param("bulk_albedo", "old name of base_albedo (an alias)", None, 0.0, 1.0, optional=True),
     )
 
     def __init_subclass__(cls, gaf: Param, **kwargs):
@@ -108,20 +159,83 @@ class MicrograinParams(BRDFModel):
             values["beta"] = values["beta_x"] if same else None
         else:
             raise ValueError(f"model {self.name!r} needs beta, or beta_x and beta_y, in {_BETA.describe()}")
-        if values.get("bulk", "absorber") == "lambert":
-            if "bulk_albedo" not in values:
-                raise ValueError("bulk = 'lambert' needs bulk_albedo in [0, 1]")
-        elif values.get("bulk_albedo", 0.0) != 0.0:
-            raise ValueError("bulk_albedo applies only to bulk = 'lambert' (bulk = 'absorber' has albedo 0)")
-        else:
-            values["bulk_albedo"] = 0.0
-        if values.get("k", 0.0) > 0.0 and values.get("albedo", 0.0) != 0.0:
-            raise ValueError("conductor grains (k > 0) are opaque: albedo must be 0")
+        _resolve_base(values)
+        _resolve_grains(values)
         return values
 
     def setup(self) -> None:
-        self.has_interface = self.k > 0.0 or self.eta != 1.0
-        self.bulk_brdf = self.bulk_albedo / math.pi
+        self.material_code = GRAIN_CODES[self.material]
+        # T of Eq. 21-22 on the diffuse term for a coat only; a specular term for every interface
+        self.has_interface = self.material == "interfaced_lambert"
+        self.has_specular = self.material != "lambert"
+        self.base_brdf = self.base_albedo / math.pi
+        # the index handed to the kernels (mirror grains: any number, F = 1 does not read it)
+        self.index = (1.0, 0.0) if self.material == "mirror" else (self.eta, self.k)
+
+
+def _resolve_base(values: dict) -> None:
+    """``base``, ``base_albedo`` from them or their old names; the old names then repeat them."""
+    typed = {}
+    for old, new in ALIASES.items():
+        typed[new] = new
+        if old in values:
+            if new in values:
+                raise ValueError(f"give {new} or its old name {old}, not both")
+            values[new] = values.pop(old)
+            typed[new] = old
+    base = values.setdefault("base", "absorber")
+    albedo_key = typed["base_albedo"]
+    if base == "lambert":
+        if "base_albedo" not in values:
+            name = "bulk_albedo" if typed["base"] == "bulk" else "base_albedo"
+            raise ValueError(f"{typed['base']} = 'lambert' needs {name} in [0, 1]")
+    elif "base_albedo" in values and (albedo_key == "base_albedo" or values["base_albedo"] != 0.0):
+        raise ValueError(f"{albedo_key} applies only to {typed['base']} = 'lambert' (an absorber has no albedo)")
+    else:
+        values["base_albedo"] = 0.0
+    values["bulk"] = values["base"]
+    values["bulk_albedo"] = values["base_albedo"]
+
+
+def _resolve_grains(values: dict) -> None:
+    """``material`` and the keys it takes, given or derived from the old form (eta, k, albedo)."""
+    material = values.get("material")
+    if material is None:
+        if values.get("k", 0.0) > 0.0:
+            if values.pop("albedo", 0.0) != 0.0:
+                raise ValueError("albedo must be left out (or 0) with k > 0: conductor grains are opaque")
+            values.setdefault("eta", 1.0)
+            material = "conductor"
+        else:
+            material = "lambert" if values.get("eta", 1.0) == 1.0 else "interfaced_lambert"
+            if material == "lambert":
+                values.pop("eta", None)
+            values.pop("k", None)
+        values["material"] = material
+    else:
+        if material == "interfaced_lambert" and values.get("k") == 0.0:
+            del values["k"]  # a dielectric: k = 0 is accepted, as no k
+        takes = GRAIN_KEYS[material]
+        for key in ("albedo", "eta", "k"):
+            if key in values and key not in takes:
+                raise ValueError(f"{key} does not apply to material = {material!r} "
+                                 f"(its keys: {', '.join(takes) or 'none'})")
+    for key in GRAIN_KEYS[material]:
+        if key not in values:
+            domain = next(p for p in MicrograinParams.params if p.name == key).describe()
+            raise ValueError(f"material = {material!r} needs {key} in {domain}")
+    values.update(GRAIN_FILL[material])
+
+
+@numba.njit(cache=True)
+def _grain_fresnel(material, cos_d, eta, k):
+    """F(i.h) of the specular grain term: 1 for mirror grains, the conductor form for conductor
+    grains (as the tracer's material, also for k = 0), the dielectric form for a coat."""
+    if material == MIRROR:
+        return 1.0
+    if material == CONDUCTOR:
+        return fresnel_conductor(cos_d, eta, k)
+    return fresnel_dielectric(cos_d, eta)
 
 
 @numba.njit(cache=True)
@@ -264,8 +378,15 @@ def _azimuthal_integral(wi, wo, a, b, h, beta_x, beta_y, eta, k, interface, px, 
 
 
 @numba.njit(cache=True)
-def _micrograin_kernel(wi, wo, tau0, beta_x, beta_y, albedo, eta, k, interface, bulk_brdf, correlated, hx, hw, px, pw):
-    """f(i, o) of Eq. 20 for pairs of directions (N, 3), both above the horizon."""
+def _micrograin_kernel(wi, wo, tau0, beta_x, beta_y, material, albedo, eta, k, base_brdf, correlated, hx, hw, px, pw):
+    """f(i, o) of Eq. 20 for pairs of directions (N, 3), both above the horizon.
+
+    ``material`` is the grains' kind code (:mod:`microsim.materials`): the diffuse term for
+    lambert and interfaced_lambert (with T), the specular term for all but lambert.
+    """
+    diffuse_grains = (material == LAMBERT or material == INTERFACED_LAMBERT) and albedo > 0.0
+    interface = material == INTERFACED_LAMBERT
+    specular = material != LAMBERT
     lam = grain_extinction(tau0)
     rate = lam / math.pi
     out = np.empty(wi.shape[0])
@@ -276,7 +397,7 @@ def _micrograin_kernel(wi, wo, tau0, beta_x, beta_y, albedo, eta, k, interface, 
         a = unit_space_direction(i[0], i[1], i[2], beta_x, beta_y)
         b = unit_space_direction(o[0], o[1], o[2], beta_x, beta_y)
         grains = 0.0
-        if albedo > 0.0:
+        if diffuse_grains:
             sa = math.sqrt(a[0] * a[0] + a[1] * a[1])
             sb = math.sqrt(b[0] * b[0] + b[1] * b[1])
             edges[0] = 0.0
@@ -296,7 +417,7 @@ def _micrograin_kernel(wi, wo, tau0, beta_x, beta_y, albedo, eta, k, interface, 
                     azimuthal = _azimuthal_integral(i, o, a, b, h, beta_x, beta_y, eta, k, interface, px, pw)
                     diffuse += half * hw[q] * density * visible * azimuthal
             grains += albedo / math.pi * diffuse / i[2] / o[2]
-        if interface:
+        if specular:
             mx, my, mz = i[0] + o[0], i[1] + o[1], i[2] + o[2]
             norm = math.sqrt(mx * mx + my * my + mz * mz)
             mx, my, mz = mx / norm, my / norm, mz / norm
@@ -304,11 +425,11 @@ def _micrograin_kernel(wi, wo, tau0, beta_x, beta_y, albedo, eta, k, interface, 
             visible = math.exp(-rate * shadowed_area(a[0], a[1], a[2], b[0], b[1], b[2], hp, correlated))
             cos_d = i[0] * mx + i[1] * my + i[2] * mz
             d = ndf_value(mx, my, mz, tau0, beta_x, beta_y)
-            grains += d * visible * fresnel(cos_d, eta, k) / (4.0 * i[2]) / o[2]
+            grains += d * visible * _grain_fresnel(material, cos_d, eta, k) / (4.0 * i[2]) / o[2]
         pores = 0.0
-        if bulk_brdf > 0.0:
+        if base_brdf > 0.0:
             pores = (1.0 - tau0) * math.exp(-rate * shadowed_area(a[0], a[1], a[2], b[0], b[1], b[2], 0.0, correlated))
-        out[n] = tau0 * grains + pores * bulk_brdf
+        out[n] = tau0 * grains + pores * base_brdf
     return out
 
 
@@ -329,7 +450,8 @@ class Micrograin(MicrograinParams, gaf=GAF):
     def _eval(self, wi, wo):
         hx, hw = self._height_rule
         px, pw = self._azimuth_rule
+        eta, k = self.index
         return _micrograin_kernel(
-            wi, wo, self.tau0, self.beta_x, self.beta_y, self.albedo, self.eta, self.k, self.has_interface,
-            self.bulk_brdf, self.gaf == "correlated", hx, hw, px, pw,
+            wi, wo, self.tau0, self.beta_x, self.beta_y, self.material_code, self.albedo, eta, k,
+            self.base_brdf, self.gaf == "correlated", hx, hw, px, pw,
         )

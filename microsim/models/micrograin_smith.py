@@ -20,20 +20,28 @@ public implementations of this model) or G = 1 / (1 + Lambda(i) + Lambda(o))
 :func:`microsim.models.micrograin_geometry.smith_lambda`.
 
 The 2023 paper is not in ``papers/``: its average transmission T_avg is taken as
-(1 - F(mu_i)) (1 - F(mu_o)), the interface transmittance at the mean normal n (1 for the
-default Lambertian grains, eta = 1, k = 0).
+(1 - F(mu_i)) (1 - F(mu_o)), the interface transmittance at the mean normal n (1 for
+``lambert`` grains; the diffuse term is absent for ``conductor`` and ``mirror`` grains, and
+``mirror`` grains have F = 1 at every angle).
 
 Extension: Lucas et al. 2023 treat isotropic grains only; beta_x != beta_y is accepted here
 through the same affine map as the 2024 model (shape-invariant NDF, Lambda(w) = Lambda_1(w'),
 tau_b+ from the unit-space direction), which reduces to the published model when
-beta_x = beta_y. Parameters and material conventions are those of ``micrograin``.
+beta_x = beta_y.
+
+Parameters are those of ``micrograin`` and mirror a micrograin scene's run config
+(CONVENTIONS 4): ``material`` (lambert | conductor | mirror | interfaced_lambert) with
+``albedo``, ``eta``, ``k`` as its ``[material]`` table takes them, ``base`` (absorber | lambert)
+with ``base_albedo``; the old names ``bulk``, ``bulk_albedo`` and the old grain description by
+``eta`` and ``k`` alone remain as aliases (see :mod:`microsim.models.micrograin`). As there, T
+omits the internal reflections of the scenes' interfaced_lambert material.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..fresnel import fresnel_array
+from ..fresnel import fresnel_conductor_array, fresnel_dielectric_array
 from .base import Param, register
 from .micrograin import MicrograinParams
 from .micrograin_geometry import ndf, pore_visibility, smith_lambda
@@ -57,7 +65,9 @@ class MicrograinSmith(MicrograinParams, gaf=GAF):
         bulk_weight = pore_visibility(wi, wo, self.tau0, self.beta_x, self.beta_y, correlated=False)
         grains = np.full(wi.shape[0], self.albedo / np.pi)
         if self.has_interface:
-            grains *= (1.0 - fresnel_array(mu_i, self.eta, self.k)) * (1.0 - fresnel_array(mu_o, self.eta, self.k))
+            t_i = 1.0 - fresnel_dielectric_array(mu_i, self.eta)
+            grains *= t_i * (1.0 - fresnel_dielectric_array(mu_o, self.eta))
+        if self.has_specular:
             hv = wi + wo
             hv /= np.linalg.norm(hv, axis=-1, keepdims=True)
             lambda_i = smith_lambda(wi, self.tau0, self.beta_x, self.beta_y)
@@ -67,6 +77,13 @@ class MicrograinSmith(MicrograinParams, gaf=GAF):
             else:
                 g = 1.0 / (1.0 + lambda_i + lambda_o)
             d = ndf(hv, self.tau0, self.beta_x, self.beta_y)
-            f = fresnel_array(np.sum(wi * hv, axis=-1), self.eta, self.k)
-            grains += d * g * f / (4.0 * mu_i) / mu_o
-        return (1.0 - bulk_weight) * grains + bulk_weight * self.bulk_brdf
+            grains += d * g * self._fresnel(np.sum(wi * hv, axis=-1)) / (4.0 * mu_i) / mu_o
+        return (1.0 - bulk_weight) * grains + bulk_weight * self.base_brdf
+
+    def _fresnel(self, cos_d):
+        """F(i.h) of the specular term, as ``micrograin._grain_fresnel``."""
+        if self.material == "mirror":
+            return np.ones_like(cos_d)
+        if self.material == "conductor":
+            return fresnel_conductor_array(cos_d, self.eta, self.k)
+        return fresnel_dielectric_array(cos_d, self.eta)
