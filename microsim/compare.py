@@ -2,10 +2,13 @@
 
 A table cell holds the cos(theta_o)-weighted average of the BRDF over the cell, so the model
 is averaged the same way, by Gauss quadrature over each cell (:meth:`Sensor.cell_quadrature`).
-The rule is refined cell by cell (4 x 4, 8 x 8, 16 x 16 nodes, then 32 x 32) until two
+The rule is refined cell by cell (4 x 4, 8 x 8, ... up to 128 x 128 nodes) until two
 successive rules differ by less than ``QUADRATURE_TOLERANCE`` of the cell's standard error, so
-the averaging error stays far below the table's noise; the largest remaining change is
-reported.
+the averaging error stays far below the table's noise; a cell without a standard error (no
+path reached it) is refined until the change is below ``RELATIVE_TOLERANCE`` of its value, so
+that the model's albedo, which sums every cell, is converged too (a narrow specular lobe at
+grazing incidence on flat grains was 0.5 % short of it when such cells stopped at 8 x 8). The
+largest remaining change, in standard errors, is reported.
 
 Metrics are taken over the cells with signal, where the table value exceeds
 ``SIGNAL_TO_NOISE`` standard errors (a relative error means nothing on a cell the simulation
@@ -20,7 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 
 QUADRATURE_TOLERANCE = 0.05
-QUADRATURE_RULES = (4, 8, 16, 32)
+RELATIVE_TOLERANCE = 1e-4
+QUADRATURE_RULES = (4, 8, 16, 32, 64, 128)
 SIGNAL_TO_NOISE = 3.0
 #: --order choice -> row of the table's brdf_order (None: all orders, the table's brdf)
 ORDER_ROWS = {"all": None, "1": 0, "2": 1, "3": 2, "4+": 3}
@@ -80,7 +84,7 @@ class Comparison:
 
 def cell_averages(model, sensor, wi: np.ndarray, stderr: np.ndarray):
     """Model averaged over every cell, refined until stable within the cell's standard error."""
-    floor = np.where(stderr > 0, stderr, np.inf)
+    has_error = stderr > 0
     pending = np.arange(sensor.n_cells)
     previous = None
     result = np.zeros(sensor.n_cells)
@@ -92,8 +96,11 @@ def cell_averages(model, sensor, wi: np.ndarray, stderr: np.ndarray):
         current = np.sum(values * weight, axis=1)
         result[pending] = current
         if previous is not None:
-            change[pending] = np.abs(current - previous) / floor[pending]
-            still = change[pending] > QUADRATURE_TOLERANCE
+            step = np.abs(current - previous)
+            measured = has_error[pending]
+            change[pending] = np.where(measured, step / np.where(measured, stderr[pending], 1.0), 0.0)
+            unmeasured_still = ~measured & (step > RELATIVE_TOLERANCE * np.abs(current) + 1e-300)
+            still = (change[pending] > QUADRATURE_TOLERANCE) | unmeasured_still
             previous = current[still]
             pending = pending[still]
             if pending.size == 0:
