@@ -1,14 +1,17 @@
-"""Throughput of both Embree backends against raw Embree, on the sphere scenes phi = 0.1, 0.3, 0.6.
+"""Throughput of both Embree backends against raw Embree, on the sphere scenes phi = 0.1, 0.3, 0.6
+and a micrograin field.
 
-For each phi (runs/spheres_phi0XX.toml, its first realization and incidence), measured side by
-side in one run, best of --repeats:
+For each scene (runs/spheres_phi0XX.toml, runs/micrograins_fig18_conductor_on_lambert.toml: its
+first realization and incidence, --scenes picks others), measured side by side in one run, best
+of --repeats:
 
 1. old backend (``embreex``: one embreex.run per segment of every live path) on the spheres
    tessellated at the former default (mesh error 0.01, icosphere level 2): one thread traces
    --paths paths, recording every ray batch handed to Embree; the batches are replayed through
    embreex alone: raw embreex rays/s, the tracer's segments/s and paths/s, their ratio, and the
    tracer's time outside Embree per segment (from the same trace, free of run-to-run drift);
-2. new backend (``direct``: numba calls Embree, fused kernel) on exact native spheres: the same
+2. new backend (``direct``: numba calls Embree, fused kernel) on exact native spheres (grains:
+   native spheres in the instance of their unit frame): the same
    number of paths with 1 and 2 threads, segments/s and paths/s. One more trace logs every query
    in the order the kernel makes them (``FusedBackend(log_rays=...)``); they are replayed
    through rtcIntersect1 alone, in that order: raw direct rays/s, and
@@ -20,7 +23,7 @@ side in one run, best of --repeats:
 Prints a table and writes benchmarks/out/throughput.png; with --json, one JSON object on the
 last line. Its top-level keys ``segments_per_s``, ``raw_rays_per_s``, ``ratio``,
 ``speedup_2_workers`` and ``outside_embree_ns_per_segment`` are those of the old backend on
-phi = 0.3, as before; ``scenes`` holds every figure per phi. About 8 minutes on 2 cores.
+phi = 0.3, as before; ``scenes`` holds every figure per scene. About 10 minutes on 2 cores.
 """
 
 from __future__ import annotations
@@ -41,6 +44,8 @@ from microsim.rng import geometry_rng, stream_key
 from microsim.sensor import Sensor
 
 ROOT = Path(__file__).resolve().parent.parent
+SPHERE_RUNS = ("spheres_phi010", "spheres_phi030", "spheres_phi060")
+MICROGRAIN_RUN = "micrograins_fig18_conductor_on_lambert"
 OUT = Path(__file__).resolve().parent / "out"
 FORMER_MESH_ERROR = 0.01
 
@@ -158,27 +163,27 @@ def measure_runs(cfg, run_paths: int, repeats: int) -> dict:
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--phis", nargs="+", default=["010", "030", "060"], help="runs/spheres_phiXXX.toml")
+    parser.add_argument("--scenes", nargs="+", default=[*SPHERE_RUNS, MICROGRAIN_RUN], help="runs/NAME.toml")
     parser.add_argument("--paths", type=int, default=200_000, help="paths of the traced batch")
     parser.add_argument("--run-paths", type=int, default=400_000, help="paths per incidence of the whole runs")
     parser.add_argument("--repeats", type=int, default=5, help="best of this many, for every figure")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     scenes = {}
-    for phi in args.phis:
-        cfg = config_module.load(ROOT / "runs" / f"spheres_phi{phi}.toml",
-                                 {"run.paths": args.run_paths, "run.realizations": 8})
+    for run in args.scenes:
+        cfg = config_module.load(ROOT / "runs" / f"{run}.toml", {"run.paths": args.run_paths, "run.realizations": 8})
         figures = measure_scene(cfg, args.paths, args.repeats)
         figures.update(measure_runs(cfg, args.run_paths, args.repeats))
         figures["speedup_2_workers"] = figures["run_paths_per_s_old_2_workers"] / figures["run_paths_per_s_old_1_worker"]
         figures["speedup_2_threads"] = figures["run_paths_per_s_new_2_threads"] / figures["run_paths_per_s_new_1_thread"]
         figures["new_2_threads_over_old_2_workers"] = (figures["run_paths_per_s_new_2_threads"]
                                                        / figures["run_paths_per_s_old_2_workers"])
-        scenes[f"0.{phi[1:]}"] = figures
-        report(f"0.{phi[1:]}", figures)
+        label = scene_label(run)
+        scenes[label] = figures
+        report(label, figures)
     chart(scenes)
     if args.json:
-        main_scene = scenes.get("0.30") or next(iter(scenes.values()))
+        main_scene = scenes.get("phi = 0.30") or next(iter(scenes.values()))
         print(json.dumps({
             "segments_per_s": main_scene["old_segments_per_s"], "raw_rays_per_s": main_scene["raw_embreex_rays_per_s"],
             "ratio": main_scene["old_ratio"], "speedup_2_workers": main_scene["speedup_2_workers"],
@@ -186,8 +191,16 @@ def main():
         }))
 
 
-def report(phi: str, f: dict) -> None:
-    print(f"phi = {phi}: {f['spheres']} spheres (exact) / {f['triangles']} triangles (tessellated), "
+def scene_label(run: str) -> str:
+    """'phi = 0.30' for runs/spheres_phi030.toml, else the run's name."""
+    if run.startswith("spheres_phi"):
+        digits = run[len("spheres_phi"):]
+        return f"phi = {digits[0]}.{digits[1:]}"
+    return run
+
+
+def report(label: str, f: dict) -> None:
+    print(f"{label}: {f['spheres']} spheres (exact) / {f['triangles']} triangles (tessellated), "
           f"{f['new_segments']} / {f['old_segments']} segments")
     print(f"  raw Embree          embreex {f['raw_embreex_rays_per_s'] / 1e6:6.3f} M rays/s (triangles)   "
           f"direct {f['raw_direct_rays_per_s'] / 1e6:6.3f} M rays/s (spheres)")
@@ -229,7 +242,7 @@ def chart(scenes: dict) -> None:
     right.set_ylabel("k paths / s (whole runs, builds included)")
     right.set_title("whole runs")
     for ax in (left, right):
-        ax.set_xticks(x, [f"phi = {p}" for p in phis])
+        ax.set_xticks(x, [p.replace("micrograins_", "micrograins\n") for p in phis], fontsize=8)
         ax.legend(fontsize=8, loc="upper left", ncol=2)
     fig.tight_layout()
     fig.savefig(OUT / "throughput.png", dpi=110)
