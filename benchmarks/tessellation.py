@@ -26,6 +26,7 @@ import numpy as np
 import geometry
 from microsim import config as config_module
 from microsim import runner
+from microsim.integrators.records import RESULT_ALL_ORDERS
 
 OUT = Path(__file__).resolve().parent / "out"
 EXACT = "exact"
@@ -56,9 +57,9 @@ def versus(result, reference):
     ref_se = np.array([a.stderr[-1] for a in reference.albedo])
     chi2 = []
     for e, f in zip(result.brdf, reference.brdf):
-        se2 = e.stderr[runner.ALL_ORDERS] ** 2 + f.stderr[runner.ALL_ORDERS] ** 2
+        se2 = e.stderr[RESULT_ALL_ORDERS] ** 2 + f.stderr[RESULT_ALL_ORDERS] ** 2
         ok = se2 > 0
-        chi2.append(np.mean((e.mean[runner.ALL_ORDERS][ok] - f.mean[runner.ALL_ORDERS][ok]) ** 2 / se2[ok]))
+        chi2.append(np.mean((e.mean[RESULT_ALL_ORDERS][ok] - f.mean[RESULT_ALL_ORDERS][ok]) ** 2 / se2[ok]))
     z = np.abs(albedo - ref) / np.sqrt(albedo_se**2 + ref_se**2)
     return albedo, albedo_se, np.array(chi2), z
 

@@ -35,15 +35,23 @@ takes that guarantee from theta_o = 86 deg to 88.8 deg (the sensor's last ring r
 it puts 4 times more grains in each realization: at grazing incidence the light that reaches
 the base, or comes back near retro, passes a few gaps between grains, so the per-realization
 estimates are skewed, and the larger the tile the closer their mean is to normal. Measured at
-theta_i = 86 deg (tau0 = 0.6, beta = 0.5, conductor grains, order 1, 64 realizations;
-``benchmarks/micrograins.py``): chi^2 per cell against the model 2.25 at L = 32, 1.74 at 64,
-0.97 at 128. The footprint term keeps FOOTPRINTS grain widths in a tile of very flat grains.
+theta_i = 86 deg (tau0 = 0.6, beta = 0.5, conductor grains, order 1, 64 realizations, 100
+cells; ``benchmarks/micrograins.py`` part c): chi^2 per cell against the model 2.25 at L = 32
+(below the no-ghost reach, 36.6), 1.33 at the default 73.2, 0.68 at 146. The footprint term
+keeps FOOTPRINTS grain widths in a tile of very flat grains. The reach uses theta_max up to
+MAX_REACH_DEG = 89.5 deg, and the default tile never holds more than MAX_DEFAULT_GRAINS grains
+(dense fields of tall grains at the most grazing incidences: light does not get far in them;
+``tile_grain_budget`` in the table says when the budget set the tile).
 A larger tile is not free: the offsets that keep scattered rays off their own grain grow with
 the float32 spacing of the coordinates (microsim/integrators/surface.py), and where grains
 overlap an origin offset past a seam starts inside the neighbour (an "inside hit", passed
 through and counted). At tau0 = 0.99, beta_x / beta_y = 1/40, theta_i = 45 deg: 2.8e-4 of the
-segments in a 640-wide tile (32 widths of the long axis), 1.7e-4 in the default 338, 0.6e-4 in
-a 160-wide one; at theta_i = 89.5 deg, 4e-5 in the default tile (tests/test_micrograins.py).
+segments in a 640-wide tile (32 widths of the long axis), 1.7e-4 in a 338-wide one (the default
+of a run whose incidences reach 89.5 deg), 0.6e-4 in a 160-wide one; at theta_i = 89.5 deg,
+4e-5 in that default tile (tests/test_micrograins.py). A path that passes into a grain that
+way may reach the base under it, and is then tallied as scattered by the base: the base term
+carries that error, bounded by the inside-hit rate. The ratio beta_x / beta_y is kept within
+[1/MAX_ANISOTROPY, MAX_ANISOTROPY] for that reason (at 1/1000 the inside hits reached 4e-3).
 Grains are cheap (one native sphere each; 1000 a realization at tau0 = 0.5, beta = 1). Every
 value used is recorded in the table's scene/ attrs.
 """
@@ -74,8 +82,13 @@ GRAZING_DEG = 86.0
 TILE_FACTOR = 2.0
 #: the tile holds at least this many grain widths
 FOOTPRINTS = 16.0
-#: beta = 10 at tau0 = 0.999 puts 0.7 M grains in the default tile (about 220 MB for Embree)
+#: the reach term stops growing at this incidence, and the default tile at this many grains
+#: (about 600 MB for Embree)
+MAX_REACH_DEG = 89.5
+MAX_DEFAULT_GRAINS = 2_000_000
 BETA_RANGE = (0.01, 10.0)
+#: the largest beta_x / beta_y (or its inverse): the tested extreme (module doc)
+MAX_ANISOTROPY = 40.0
 #: the slab's top lies this far above the grain tips; its bottom this far under the base
 SLAB_MARGIN = 1e-3
 #: an icosphere face is kept if a vertex lies above this height (unit frame)
@@ -102,6 +115,9 @@ class Config(Section):
         if self.beta is None and len(given) != 2:
             raise ValueError("scene.beta: missing; give beta, or beta_x and beta_y, each in "
                              f"[{BETA_RANGE[0]:g}, {BETA_RANGE[1]:g}]")
+        if self.beta is None and max(self.beta_x / self.beta_y, self.beta_y / self.beta_x) > MAX_ANISOTROPY:
+            raise ValueError(f"scene.beta_x / scene.beta_y = {self.beta_x / self.beta_y:g}: out of range; accepted: "
+                             f"[1/{MAX_ANISOTROPY:g}, {MAX_ANISOTROPY:g}]")
         return self
 
     @property
@@ -129,18 +145,24 @@ def for_backend(config, backend: str):
     return config, ""
 
 
-def default_tile(beta_x: float, beta_y: float, theta_max_deg: float) -> float:
-    """The default tile side (see the module doc)."""
+def default_tile(beta_x: float, beta_y: float, theta_max_deg: float, density: float) -> tuple[float, bool]:
+    """The default tile side (see the module doc), and whether the grain budget set it."""
     a = max(1.0 / beta_x, 1.0 / beta_y)
-    reach = math.tan(math.radians(max(theta_max_deg, GRAZING_DEG))) + math.tan(math.radians(GRAZING_DEG))
-    return max(TILE_FACTOR * (reach + 4.0 * a), FOOTPRINTS * 2.0 * a)
+    angle = min(max(theta_max_deg, GRAZING_DEG), MAX_REACH_DEG)
+    reach = math.tan(math.radians(angle)) + math.tan(math.radians(GRAZING_DEG))
+    tile = max(TILE_FACTOR * (reach + 4.0 * a), FOOTPRINTS * 2.0 * a)
+    budget = math.sqrt(MAX_DEFAULT_GRAINS / density)
+    if tile > budget and budget > FOOTPRINTS * 2.0 * a:
+        return budget, True
+    return tile, False
 
 
 def resolve(config) -> dict:
     scene = config.scene
     beta_x, beta_y = scene.betas
     theta_max = max(config.illumination.theta_i_deg)
-    tile = scene.tile if scene.tile is not None else default_tile(beta_x, beta_y, theta_max)
+    rho = grain_density(scene.tau0, beta_x, beta_y)
+    tile, budget = (scene.tile, False) if scene.tile is not None else default_tile(beta_x, beta_y, theta_max, rho)
     if is_exact(scene):
         model = {"grain_model": "exact", "triangles_per_grain": 0, "vertex_radius": 1.0, "max_mesh_error": 0.0}
     else:
@@ -148,7 +170,6 @@ def resolve(config) -> dict:
         vertices, faces, vertex_radius, error = unit_icosphere(level)
         model = {"grain_model": "icosphere", "subdivisions": level, "triangles_per_grain": len(_upper_faces(level)),
                  "vertex_radius": vertex_radius, "max_mesh_error": error}
-    rho = grain_density(scene.tau0, beta_x, beta_y)
     return {
         "kind": KIND,
         "tau0": scene.tau0,
@@ -158,7 +179,8 @@ def resolve(config) -> dict:
         "grain_density": rho,
         "tile": tile,
         "tile_default": scene.tile is None,
-        "tile_grazing_deg": max(theta_max, GRAZING_DEG),
+        "tile_grazing_deg": min(max(theta_max, GRAZING_DEG), MAX_REACH_DEG),
+        "tile_grain_budget": budget,
         **model,
         "expected_grains": rho * tile * tile,
         "base": config.base.kind if config.base is not None else "absorber",

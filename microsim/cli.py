@@ -122,8 +122,10 @@ def run(config_path, out, workers, threads, backend, paths, seed, force):
             tables.write(out, result, config, overwrite=force)
         except tables.TableExists as err:
             raise BadInput(f"--out: {err}") from None
+    azimuths = len(set(plan.phi_i.tolist())) > 1  # paired azimuths: name each incidence by both angles
     albedo = ", ".join(
-        f"{math.degrees(t):g}deg {a.mean[-1]:.4f}+-{a.stderr[-1]:.4f}" for t, a in zip(plan.theta_i, result.albedo)
+        f"{math.degrees(t):g}{f'/{math.degrees(p):g}' if azimuths else ''}deg {a.mean[-1]:.4f}+-{a.stderr[-1]:.4f}"
+        for t, p, a in zip(plan.theta_i, plan.phi_i, result.albedo)
     )
     rate = total / result.wall_time
     click.echo(f"albedo {albedo} | {result.wall_time:.1f} s, {rate:.3g} paths/s, {workers} worker(s) x "
@@ -180,14 +182,15 @@ def compare(table_path, model_name, params, order, as_json, plot_dir):
     else:
         click.echo(f"{model!r} vs {table_path} (order {order}; cells with signal: table > "
                    f"{compare_module.SIGNAL_TO_NOISE:g} standard errors)")
-        click.echo(f"{'theta_i':>8} {'cells':>6} {'med|rel|':>9} {'rel rmse':>9} {'max|z|':>8} "
+        click.echo(f"{'theta_i':>8} {'phi_i':>6} {'cells':>6} {'med|rel|':>9} {'rel rmse':>9} {'max|z|':>8} "
                    f"{'albedo model':>13} {'albedo sim':>16}")
         for row in result.as_dict()["per_incidence"]:
-            click.echo(f"{row['theta_i_deg']:8.1f} {row['cells_with_signal']:6d} {row['median_abs_rel_err']:9.4f} "
+            click.echo(f"{row['theta_i_deg']:8.1f} {row['phi_i_deg']:6.1f} {row['cells_with_signal']:6d} "
+                       f"{row['median_abs_rel_err']:9.4f} "
                        f"{row['rel_rmse']:9.4f} {row['max_abs_z']:8.2f} {row['albedo_model']:13.4f} "
                        f"{row['albedo_sim']:9.4f}+-{row['albedo_sim_stderr']:.4f}")
         o = result.as_dict()["overall"]
-        click.echo(f"{'overall':>8} {o['cells_with_signal']:6d} {o['median_abs_rel_err']:9.4f} {o['rel_rmse']:9.4f} "
+        click.echo(f"{'overall':>8} {'':>6} {o['cells_with_signal']:6d} {o['median_abs_rel_err']:9.4f} {o['rel_rmse']:9.4f} "
                    f"{o['max_abs_z']:8.2f}")
     if plot_dir is not None and not as_json:
         click.echo(f"{len(written)} figures written to {plot_dir}")

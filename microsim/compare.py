@@ -5,10 +5,11 @@ is averaged the same way, by Gauss quadrature over each cell (:meth:`Sensor.cell
 The rule is refined cell by cell (4 x 4, 8 x 8, ... up to 128 x 128 nodes) until two
 successive rules differ by less than ``QUADRATURE_TOLERANCE`` of the cell's standard error, so
 the averaging error stays far below the table's noise; a cell without a standard error (no
-path reached it) is refined until the change is below ``RELATIVE_TOLERANCE`` of its value, so
-that the model's albedo, which sums every cell, is converged too (a narrow specular lobe at
-grazing incidence on flat grains was 0.5 % short of it when such cells stopped at 8 x 8). The
-largest remaining change, in standard errors, is reported.
+path reached it) is refined until its change, times its projected solid angle, is below
+``ALBEDO_TOLERANCE`` / cells of the model's albedo, so that the albedo, which sums every cell,
+is converged too (a narrow specular lobe at grazing incidence on flat grains left it 0.5 %
+short when such cells stopped at 8 x 8). The largest remaining change is reported, in standard
+errors (for cells without one, in their albedo share over QUADRATURE_TOLERANCE).
 
 Metrics are taken over the cells with signal, where the table value exceeds
 ``SIGNAL_TO_NOISE`` standard errors (a relative error means nothing on a cell the simulation
@@ -23,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 QUADRATURE_TOLERANCE = 0.05
-RELATIVE_TOLERANCE = 1e-4
+ALBEDO_TOLERANCE = 1e-4
 QUADRATURE_RULES = (4, 8, 16, 32, 64, 128)
 SIGNAL_TO_NOISE = 3.0
 #: --order choice -> row of the table's brdf_order (None: all orders, the table's brdf)
@@ -83,30 +84,29 @@ class Comparison:
 
 
 def cell_averages(model, sensor, wi: np.ndarray, stderr: np.ndarray):
-    """Model averaged over every cell, refined until stable within the cell's standard error."""
-    has_error = stderr > 0
+    """Model averaged over every cell, refined until stable within the cell's standard error
+    (cells without one: within their share of ALBEDO_TOLERANCE of the albedo)."""
+    projected = sensor.projected_solid_angle()
     pending = np.arange(sensor.n_cells)
     previous = None
     result = np.zeros(sensor.n_cells)
     change = np.zeros(sensor.n_cells)
     for n in QUADRATURE_RULES:
-        w, weight = sensor.cell_quadrature(n, n)
-        w, weight = w[pending], weight[pending]
+        w, weight = sensor.cell_quadrature(n, n, pending)
         values = model(np.broadcast_to(wi, w.shape), w)
         current = np.sum(values * weight, axis=1)
         result[pending] = current
-        if previous is not None:
-            step = np.abs(current - previous)
-            measured = has_error[pending]
-            change[pending] = np.where(measured, step / np.where(measured, stderr[pending], 1.0), 0.0)
-            unmeasured_still = ~measured & (step > RELATIVE_TOLERANCE * np.abs(current) + 1e-300)
-            still = (change[pending] > QUADRATURE_TOLERANCE) | unmeasured_still
-            previous = current[still]
-            pending = pending[still]
-            if pending.size == 0:
-                break
-        else:
+        if previous is None:
+            share = ALBEDO_TOLERANCE * max(float(result @ projected), 1e-300) / sensor.n_cells / projected
+            floor = np.where(stderr > 0, stderr, share / QUADRATURE_TOLERANCE)
             previous = current
+            continue
+        change[pending] = np.abs(current - previous) / floor[pending]
+        still = change[pending] > QUADRATURE_TOLERANCE
+        previous = current[still]
+        pending = pending[still]
+        if pending.size == 0:
+            break
     return result, float(change.max(initial=0.0))
 
 

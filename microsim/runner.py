@@ -159,10 +159,6 @@ class Estimate:
         return np.sqrt(var / n)
 
 
-#: rows of ``Result.brdf`` after the orders
-ALL_ORDERS, ORDER1_BASE = ORDERS, ORDERS + 1
-
-
 @dataclass
 class Result:
     """Per-incidence estimates of a run, ready for :func:`microsim.tables.write`."""
@@ -170,7 +166,7 @@ class Result:
     plan: Plan
     sensor: Sensor
     brdf: list  # per incidence: Estimate of f_C over (ORDERS + 2, n_cells): the orders, all orders
-    #             (row ALL_ORDERS), order 1 scattered by the base (row ORDER1_BASE)
+    #             (row RESULT_ALL_ORDERS), order 1 scattered by the base (row RESULT_ORDER1_BASE)
     albedo: list  # per incidence: Estimate over (ORDERS + 1,)
     energy: list  # per incidence: Estimate over (*ENERGY_NAMES, balance)
     counts: np.ndarray  # (n_incidences, len(COUNT_NAMES)) tracer event counts

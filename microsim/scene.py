@@ -137,6 +137,8 @@ class SceneBuilder:
 
     def add_spheres(self, centres, radius: float, material: Material) -> None:
         """Exact spheres, Embree's native primitive: one float4 (x, y, z, r) and one shape each."""
+        if self.sphere_scale != (1.0, 1.0):
+            raise ValueError("the native spheres of a scene share one frame: spheres cannot join scaled ellipsoids")
         n = len(centres)
         self.spheres.append(np.column_stack([centres, np.full(n, radius)]))
         self.sphere_shape.append(np.arange(n, dtype=np.int32) + self.n_shapes)

@@ -127,8 +127,9 @@ class Sensor(NamedTuple):
         w = np.ascontiguousarray(w, dtype=np.float64).reshape(-1, 3)
         return _cell_indices(w, self)
 
-    def cell_quadrature(self, n_theta: int = 4, n_phi: int = 4):
-        """Nodes and weights averaging a function over each cell with the cos(theta) weight.
+    def cell_quadrature(self, n_theta: int = 4, n_phi: int = 4, cells=None):
+        """Nodes and weights averaging a function over each cell (or over ``cells``, an index
+        array) with the cos(theta) weight.
 
         Returns ``(w (N, n_theta * n_phi, 3), weight (N, n_theta * n_phi))`` such that
         ``sum(weight * g(w), axis=1)`` is the cos-weighted mean of g over each cell, i.e.
@@ -137,9 +138,10 @@ class Sensor(NamedTuple):
         2 n_theta - 2), and Gauss-Legendre in phi.
         """
         c = self.cos_edges
-        ring = self.ring_of_cell()
+        cells = np.arange(self.n_cells) if cells is None else np.asarray(cells)
+        ring = self.ring_of_cell()[cells]
         mu_lo, mu_hi = c[ring + 1], c[ring]
-        _, _, p_lo, p_hi = self.cell_bounds()
+        _, _, p_lo, p_hi = (bounds[cells] for bounds in self.cell_bounds())
         xt, wt = np.polynomial.legendre.leggauss(n_theta)
         xp, wp = np.polynomial.legendre.leggauss(n_phi)
         half = 0.5 * (mu_hi - mu_lo)[:, None]
@@ -152,7 +154,7 @@ class Sensor(NamedTuple):
         phi = phi[:, None, :]
         w = np.stack(np.broadcast_arrays(sin_t * np.cos(phi), sin_t * np.sin(phi), mu3), axis=-1)
         weight = w_mu[:, :, None] * (0.5 * wp)[None, None, :]
-        return w.reshape(self.n_cells, -1, 3), weight.reshape(self.n_cells, -1)
+        return w.reshape(len(cells), -1, 3), weight.reshape(len(cells), -1)
 
     def cell_average(self, func, n_theta: int = 4, n_phi: int = 4) -> np.ndarray:
         """cos(theta)-weighted average over each cell of ``func(w (M, 3)) -> (M,)``."""

@@ -42,8 +42,7 @@ import numpy as np
 
 from . import __version__
 from .frames import direction
-from .integrators.records import COUNT_NAMES, ENERGY_NAMES, ORDERS
-from .runner import ALL_ORDERS, ORDER1_BASE
+from .integrators.records import COUNT_NAMES, ENERGY_NAMES, ORDERS, RESULT_ALL_ORDERS, RESULT_ORDER1_BASE
 from .sensor import Sensor
 
 
@@ -121,13 +120,13 @@ def write(path: str | Path, result, config, overwrite: bool = False) -> Path:
             _store(h5, "sensor/ring_counts", sensor.ring_counts)
             h5["sensor"].attrs["cells_requested"] = plan.sensor_cells
             brdf = result.brdf
-            _store(h5, "brdf", np.stack([e.mean[ALL_ORDERS] for e in brdf]))
-            _store(h5, "brdf_stderr", np.stack([e.stderr[ALL_ORDERS] for e in brdf]))
+            _store(h5, "brdf", np.stack([e.mean[RESULT_ALL_ORDERS] for e in brdf]))
+            _store(h5, "brdf_stderr", np.stack([e.stderr[RESULT_ALL_ORDERS] for e in brdf]))
             _store(h5, "brdf_order", np.stack([e.mean[:ORDERS] for e in brdf]))
             _store(h5, "brdf_order_stderr", np.stack([e.stderr[:ORDERS] for e in brdf]))
             if plan.scene.get("base", "none") != "none":
-                _store(h5, "brdf_order1_base", np.stack([e.mean[ORDER1_BASE] for e in brdf]))
-                _store(h5, "brdf_order1_base_stderr", np.stack([e.stderr[ORDER1_BASE] for e in brdf]))
+                _store(h5, "brdf_order1_base", np.stack([e.mean[RESULT_ORDER1_BASE] for e in brdf]))
+                _store(h5, "brdf_order1_base_stderr", np.stack([e.stderr[RESULT_ORDER1_BASE] for e in brdf]))
             _store(h5, "albedo", np.array([a.mean[-1] for a in result.albedo]))
             _store(h5, "albedo_stderr", np.array([a.stderr[-1] for a in result.albedo]))
             _store(h5, "albedo_order", np.stack([a.mean[:-1] for a in result.albedo]))

@@ -120,3 +120,21 @@ def test_compare_on_a_missing_or_foreign_file(tmp_path, capsys):
     for path in (tmp_path / "missing.h5", foreign):
         assert main(["compare", str(path), "--model", "lambert", "--param", "albedo=0.5"]) == 2
         assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def test_cells_without_standard_error_are_refined_until_the_albedo_converges():
+    """A narrow specular lobe (conductor grains, tau0 = 0.95, beta = 0.2, theta_i = 86 deg) on
+    cells that no path reached (standard error 0): the model's albedo from the refined cell
+    averages equals a 256 x 256 rule on every cell to ALBEDO_TOLERANCE."""
+    from microsim.compare import ALBEDO_TOLERANCE
+    from microsim.frames import direction
+
+    model = models.create("micrograin", tau0=0.95, beta=0.2, material="conductor", eta=1.0152, k=6.6273)
+    wi = direction(np.radians(86.0), 0.0)
+    sensor = Sensor.build(100)
+    averages, _ = cell_averages(model, sensor, wi, np.zeros(sensor.n_cells))
+    reference = sensor.cell_average(lambda w: model(np.broadcast_to(wi, w.shape), w), 256, 256)
+    p = sensor.projected_solid_angle()
+    assert abs(averages @ p - reference @ p) <= ALBEDO_TOLERANCE * (reference @ p)
+    coarse = sensor.cell_average(lambda w: model(np.broadcast_to(wi, w.shape), w), 8, 8)
+    assert abs(coarse @ p - reference @ p) > ALBEDO_TOLERANCE * (reference @ p)  # the lobe needs the refinement

@@ -54,3 +54,24 @@ def test_shadow_rays_are_blocked_by_triangles_and_spheres_only_within_tfar():
                              [[0, 0, -1], [0, 0, -1], [0, 0, -1], [0, 0, -1], [0, 0, 1]],
                              [4.0, 2.9, 3.0, 2.4, 10.0])
     assert blocked.tolist() == [True, False, True, False, False]
+
+
+def test_spheres_in_a_scaled_frame_are_the_ellipsoids_they_stand_for():
+    """Spheres given in the frame scaled by (sx, sy) (an Embree instance): rays from outside hit
+    the ellipsoid of semi-axes (r / sx, r / sy, r) at the analytic distance, and the normal
+    comes back in the world frame (the ellipsoid's gradient direction)."""
+    sx, sy = 0.4, 2.5
+    scene = embree.Scene(spheres=[[0.0, 0.0, 0.0, 1.0]], sphere_scale=(sx, sy))
+    rng = np.random.default_rng(3)
+    target = rng.normal(size=(500, 3))
+    target /= np.linalg.norm(target, axis=1)[:, None]
+    target *= np.array([1 / sx, 1 / sy, 1.0])  # points of the ellipsoid
+    gradient = target * np.array([sx * sx, sy * sy, 1.0])
+    normal = gradient / np.linalg.norm(gradient, axis=1)[:, None]
+    directions = -normal  # aimed at each point along its inward normal, from 5 units out
+    origins = target + 5.0 * normal
+    prim, t, ng = scene.intersect(origins, directions, np.full(500, 100.0))
+    assert np.all(prim == 0)
+    assert np.allclose(t, 5.0, atol=1e-4)
+    ng = ng / np.linalg.norm(ng, axis=1)[:, None]
+    assert np.all(np.einsum("ij,ij->i", ng, normal) > 1 - 1e-6)

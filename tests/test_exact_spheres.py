@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from microsim import config, runner
+from microsim.integrators.records import RESULT_ALL_ORDERS
 from stat_bounds import chi2_bound
 
 REALIZATIONS = 16
@@ -30,8 +31,8 @@ def test_exact_spheres_agree_with_the_finest_icospheres_within_errors():
     exact, mesh = table(21), table(22, subdivisions=3)
     for i in range(3):
         a, b = exact.brdf[i], mesh.brdf[i]
-        se2 = a.stderr[runner.ALL_ORDERS] ** 2 + b.stderr[runner.ALL_ORDERS] ** 2
-        z2 = (a.mean[runner.ALL_ORDERS] - b.mean[runner.ALL_ORDERS]) ** 2 / se2
+        se2 = a.stderr[RESULT_ALL_ORDERS] ** 2 + b.stderr[RESULT_ALL_ORDERS] ** 2
+        z2 = (a.mean[RESULT_ALL_ORDERS] - b.mean[RESULT_ALL_ORDERS]) ** 2 / se2
         assert np.mean(z2) <= chi2_bound(len(z2), REALIZATIONS)
         albedo_z = (exact.albedo[i].mean[-1] - mesh.albedo[i].mean[-1]) / np.hypot(exact.albedo[i].stderr[-1],
                                                                                   mesh.albedo[i].stderr[-1])

@@ -113,6 +113,16 @@ def test_grain_count_and_covered_fraction_follow_tau0():
     assert abs(np.mean(covered) - 0.6) <= 4 * np.std(covered, ddof=1) / np.sqrt(len(covered))
 
 
+def test_anisotropy_beyond_the_tested_extreme_is_refused():
+    with pytest.raises(config.ConfigError, match=r"scene.beta_x / scene.beta_y = 0.02: out of range"):
+        scene_config(beta_x=0.1, beta_y=5.0)
+
+
+def test_phi_i_deg_must_pair_with_theta_i_deg():
+    with pytest.raises(config.ConfigError, match="illumination.phi_i_deg: a list of 3 azimuths for 2 theta_i_deg"):
+        config.validate(micrograin_config((0.5, 1.0, 1.0), LAMBERT, theta=[0.0, 45.0], phi=[0.0, 90.0, 0.0]))
+
+
 def test_resolved_scene_records_what_was_used():
     cfg = scene_config()
     resolved = geometry.SCENES["micrograins"].resolve(cfg)
@@ -276,6 +286,7 @@ def test_white_furnace_returns_every_path(simulate, tau0, beta):
     assert np.all(table.arrays["energy/transmitted"] == 0.0)
     assert np.all(table.arrays["energy/absorbed"] == 0.0)
     assert np.all(np.abs(table.albedo + table.arrays["energy/truncated"] - 1.0) <= 1e-6)
+    assert np.all(table.arrays["energy/truncated"] <= 1e-4)  # the paths do come out
 
 
 # ---------------------------------------------------------------- e: reciprocity

@@ -21,7 +21,7 @@ body serves both slots: numba compiles the kernel in 27 s, against 5 s with one 
 with a third copy of the event kernels for the last slot alone.
 
 Memory is one scene per process, a few hundred bytes per path row, and the tallies of one wave
-(WAVE_CHUNKS_PER_THREAD x threads x 5 x cells doubles).
+(WAVE_CHUNKS_PER_THREAD x threads x TALLY_ROWS x cells doubles).
 
 Python threads rather than a numba ``prange``: numba's parallel loops take no tuples of arrays
 (the named bundles), and its OpenMP layer is not fork-safe (the runner forks worker processes

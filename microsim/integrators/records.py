@@ -22,6 +22,9 @@ ORDERS = 4
 #: (CONVENTIONS 6, ``brdf_order1_base``); rows 0 .. ORDERS-1 are the orders, all surfaces
 BASE_ROW = ORDERS
 TALLY_ROWS = ORDERS + 1
+#: rows of a run's per-incidence BRDF estimate (``runner.Result.brdf``) after the orders: all
+#: orders, then order 1 scattered by the base
+RESULT_ALL_ORDERS, RESULT_ORDER1_BASE = ORDERS, ORDERS + 1
 
 #: what a path carries from segment to segment: name -> dtype (one row per path)
 PATH_FIELDS = {
