@@ -51,10 +51,10 @@ def run_model(phi: float, model, paths: int, realizations: int, threads: int):
 
 def versus(result, reference):
     """(albedo, albedo se, chi-square per cell of the BRDF, |albedo difference| / combined se) per incidence."""
-    albedo = np.array([a.mean[-1] for a in result.albedo])
-    albedo_se = np.array([a.stderr[-1] for a in result.albedo])
-    ref = np.array([a.mean[-1] for a in reference.albedo])
-    ref_se = np.array([a.stderr[-1] for a in reference.albedo])
+    albedo = np.array([a.mean[RESULT_ALL_ORDERS] for a in result.albedo])
+    albedo_se = np.array([a.stderr[RESULT_ALL_ORDERS] for a in result.albedo])
+    ref = np.array([a.mean[RESULT_ALL_ORDERS] for a in reference.albedo])
+    ref_se = np.array([a.stderr[RESULT_ALL_ORDERS] for a in reference.albedo])
     chi2 = []
     for e, f in zip(result.brdf, reference.brdf):
         se2 = e.stderr[RESULT_ALL_ORDERS] ** 2 + f.stderr[RESULT_ALL_ORDERS] ** 2

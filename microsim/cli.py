@@ -22,6 +22,7 @@ import click
 
 from . import config as config_module
 from .compare import ORDER_ROWS
+from .integrators.records import RESULT_ALL_ORDERS
 
 EXIT_BAD_INPUT = 2
 #: threads a process may run (Python threads, each tracing in a numba call without the GIL)
@@ -124,7 +125,7 @@ def run(config_path, out, workers, threads, backend, paths, seed, force):
             raise BadInput(f"--out: {err}") from None
     azimuths = len(set(plan.phi_i.tolist())) > 1  # paired azimuths: name each incidence by both angles
     albedo = ", ".join(
-        f"{math.degrees(t):g}{f'/{math.degrees(p):g}' if azimuths else ''}deg {a.mean[-1]:.4f}+-{a.stderr[-1]:.4f}"
+        f"{math.degrees(t):g}{f'/{math.degrees(p):g}' if azimuths else ''}deg {a.mean[RESULT_ALL_ORDERS]:.4f}+-{a.stderr[RESULT_ALL_ORDERS]:.4f}"
         for t, p, a in zip(plan.theta_i, plan.phi_i, result.albedo)
     )
     rate = total / result.wall_time
@@ -140,7 +141,8 @@ def run(config_path, out, workers, threads, backend, paths, seed, force):
 @click.option("--model", "model_name", required=True, help="analytic model (see `microsim models`)")
 @click.option("--param", "params", multiple=True, metavar="KEY=VALUE", help="model parameter, repeatable")
 @click.option("--order", type=click.Choice(list(ORDER_ROWS)), default="all", show_default=True,
-              help="compare with one scattering order of the table")
+              help="compare with one scattering order of the table, or with the part of order 1 that the "
+                   "base scattered (1-base; scenes with a base)")
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object")
 @click.option("--plot", "plot_dir", type=click.Path(file_okay=False, path_type=Path),
               help="write PNG figures (polar maps, plane of incidence) into this directory")

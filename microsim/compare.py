@@ -27,8 +27,10 @@ QUADRATURE_TOLERANCE = 0.05
 ALBEDO_TOLERANCE = 1e-4
 QUADRATURE_RULES = (4, 8, 16, 32, 64, 128)
 SIGNAL_TO_NOISE = 3.0
-#: --order choice -> row of the table's brdf_order (None: all orders, the table's brdf)
-ORDER_ROWS = {"all": None, "1": 0, "2": 1, "3": 2, "4+": 3}
+#: --order choice -> row of the table's brdf_order (None: all orders, the table's brdf; BASE: the
+#: part of order 1 scattered by the base, brdf_order1_base, in tables of scenes with a base)
+BASE = "base"
+ORDER_ROWS = {"all": None, "1": 0, "2": 1, "3": 2, "4+": 3, "1-base": BASE}
 
 
 @dataclass
@@ -115,9 +117,10 @@ def compare(table, model, order: str = "all") -> Comparison:
     if order not in ORDER_ROWS:
         raise ValueError(f"order {order!r}; accepted: {', '.join(ORDER_ROWS)}")
     row = ORDER_ROWS[order]
-    sim = table.brdf if row is None else table.brdf_order[:, row, :]
-    stderr = table.brdf_stderr if row is None else table.arrays["brdf_order_stderr"][:, row, :]
-    names = ("brdf", "brdf_stderr") if row is None else ("brdf_order", "brdf_order_stderr")
+    if row == BASE and not {"brdf_order1_base", "albedo_order1_base"} <= table.arrays.keys():
+        raise ValueError(f"--order 1-base: table {table.path} has no brdf_order1_base and albedo_order1_base "
+                         "(its scene has no base, or it was written before they existed)")
+    names, sim, stderr, albedo_sim, albedo_se = _selected(table, row)
     for name, values in zip(names, (sim, stderr)):
         _require_finite(values, f"table {table.path}: {name} (order {order})")
     modelled = np.zeros_like(sim)
@@ -128,13 +131,20 @@ def compare(table, model, order: str = "all") -> Comparison:
     _require_finite(modelled, f"model {model!r}")
     signal = (stderr > 0) & (sim > SIGNAL_TO_NOISE * stderr)
     p = table.projected_solid_angle
-    if row is None:
-        albedo_sim, albedo_se = table.albedo, table.albedo_stderr
-    else:
-        albedo_sim = table.arrays["albedo_order"][:, row]
-        albedo_se = table.arrays["albedo_order_stderr"][:, row]
     return Comparison(model.name, dict(model.values), order, table.theta_i, table.phi_i, modelled, sim, stderr,
                       signal, modelled @ p, albedo_sim, albedo_se, worst)
+
+
+def _selected(table, row):
+    """(dataset names, f_C, its standard error, albedo, its standard error) of an ORDER_ROWS row."""
+    a = table.arrays
+    if row is None:
+        return ("brdf", "brdf_stderr"), table.brdf, table.brdf_stderr, table.albedo, table.albedo_stderr
+    if row == BASE:
+        return (("brdf_order1_base", "brdf_order1_base_stderr"), a["brdf_order1_base"], a["brdf_order1_base_stderr"],
+                a["albedo_order1_base"], a["albedo_order1_base_stderr"])
+    return (("brdf_order", "brdf_order_stderr"), table.brdf_order[:, row, :], a["brdf_order_stderr"][:, row, :],
+            a["albedo_order"][:, row], a["albedo_order_stderr"][:, row])
 
 
 def _degrees(radians: float) -> float:

@@ -39,7 +39,7 @@ import geometry
 from .frames import direction
 from . import embree, integrators
 from .integrators import fused, wavefront
-from .integrators.records import BASE_ROW, COUNT_NAMES, ENERGY_NAMES, ORDERS, TALLY_ROWS
+from .integrators.records import BASE_ROW, COUNT_NAMES, ENERGY_NAMES, ORDERS, RESULT_ALL_ORDERS, TALLY_ROWS
 from .rng import geometry_rng, stream_key
 from .sensor import Sensor
 
@@ -167,7 +167,7 @@ class Result:
     sensor: Sensor
     brdf: list  # per incidence: Estimate of f_C over (ORDERS + 2, n_cells): the orders, all orders
     #             (row RESULT_ALL_ORDERS), order 1 scattered by the base (row RESULT_ORDER1_BASE)
-    albedo: list  # per incidence: Estimate over (ORDERS + 1,)
+    albedo: list  # per incidence: Estimate over (ORDERS + 2,), rows as brdf's
     energy: list  # per incidence: Estimate over (*ENERGY_NAMES, balance)
     counts: np.ndarray  # (n_incidences, len(COUNT_NAMES)) tracer event counts
     scene_info: dict = field(default_factory=dict)  # realization -> info of the generated scene
@@ -187,7 +187,7 @@ class _Reducer:
         self.result = Result(
             plan, sensor,
             [Estimate.zeros((ORDERS + 2, n_c)) for _ in range(n_i)],
-            [Estimate.zeros(ORDERS + 1) for _ in range(n_i)],
+            [Estimate.zeros(ORDERS + 2) for _ in range(n_i)],
             [Estimate.zeros(len(ENERGY_NAMES) + 1) for _ in range(n_i)],
             np.zeros((n_i, len(COUNT_NAMES)), np.int64),
         )
@@ -207,12 +207,12 @@ class _Reducer:
         i = unit[1]
         res = self.result
         per_path = tally.exit_weight / tally.paths
-        cells = np.vstack([per_path[:ORDERS], per_path[:ORDERS].sum(axis=0)])
-        res.brdf[i].add(np.vstack([cells, per_path[BASE_ROW]]) / res.sensor.projected_solid_angle())
+        cells = np.vstack([per_path[:ORDERS], per_path[:ORDERS].sum(axis=0), per_path[BASE_ROW]])
+        res.brdf[i].add(cells / res.sensor.projected_solid_angle())
         albedo = cells.sum(axis=1)
         res.albedo[i].add(albedo)
         lost = tally.energy / tally.paths
-        res.energy[i].add(np.append(lost, albedo[-1] + lost.sum()))
+        res.energy[i].add(np.append(lost, albedo[RESULT_ALL_ORDERS] + lost.sum()))
         res.counts[i] += tally.counts
 
     @property

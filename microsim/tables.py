@@ -127,10 +127,14 @@ def write(path: str | Path, result, config, overwrite: bool = False) -> Path:
             if plan.scene.get("base", "none") != "none":
                 _store(h5, "brdf_order1_base", np.stack([e.mean[RESULT_ORDER1_BASE] for e in brdf]))
                 _store(h5, "brdf_order1_base_stderr", np.stack([e.stderr[RESULT_ORDER1_BASE] for e in brdf]))
-            _store(h5, "albedo", np.array([a.mean[-1] for a in result.albedo]))
-            _store(h5, "albedo_stderr", np.array([a.stderr[-1] for a in result.albedo]))
-            _store(h5, "albedo_order", np.stack([a.mean[:-1] for a in result.albedo]))
-            _store(h5, "albedo_order_stderr", np.stack([a.stderr[:-1] for a in result.albedo]))
+            albedo = result.albedo
+            _store(h5, "albedo", np.array([a.mean[RESULT_ALL_ORDERS] for a in albedo]))
+            _store(h5, "albedo_stderr", np.array([a.stderr[RESULT_ALL_ORDERS] for a in albedo]))
+            _store(h5, "albedo_order", np.stack([a.mean[:ORDERS] for a in albedo]))
+            _store(h5, "albedo_order_stderr", np.stack([a.stderr[:ORDERS] for a in albedo]))
+            if plan.scene.get("base", "none") != "none":
+                _store(h5, "albedo_order1_base", np.array([a.mean[RESULT_ORDER1_BASE] for a in albedo]))
+                _store(h5, "albedo_order1_base_stderr", np.array([a.stderr[RESULT_ORDER1_BASE] for a in albedo]))
             for j, name in enumerate((*ENERGY_NAMES, "balance")):
                 _store(h5, f"energy/{name}", np.array([e.mean[j] for e in result.energy]))
                 _store(h5, f"energy/{name}_stderr", np.array([e.stderr[j] for e in result.energy]))
@@ -236,7 +240,8 @@ AXES = {
     **{name: ("incidences", "cells")
        for name in ("brdf", "brdf_stderr", "brdf_order1_base", "brdf_order1_base_stderr")},
     **{name: ("incidences", "orders", "cells") for name in ("brdf_order", "brdf_order_stderr")},
-    **{name: ("incidences",) for name in ("albedo", "albedo_stderr", "paths")},
+    **{name: ("incidences",)
+       for name in ("albedo", "albedo_stderr", "albedo_order1_base", "albedo_order1_base_stderr", "paths")},
     **{name: ("incidences", "orders") for name in ("albedo_order", "albedo_order_stderr")},
     **{f"energy/{name}{suffix}": ("incidences",) for name in (*ENERGY_NAMES, "balance") for suffix in ("", "_stderr")},
     **{f"diagnostics/{name}": ("incidences",) for name in COUNT_NAMES},

@@ -18,6 +18,7 @@ plus model error: the path counts are chosen so that the noise alone sits near 1
 
 from __future__ import annotations
 
+import json
 from fractions import Fraction
 
 import numpy as np
@@ -344,3 +345,26 @@ def test_extreme_field_at_89_5_deg_accounts_for_every_unit_of_energy(simulate):
     assert np.all(np.abs(table.arrays["energy/balance"] - 1.0) <= 4 * table.arrays["energy/balance_stderr"] + 1e-12)
     assert np.all(table.arrays["energy/transmitted"] == 0.0)
     assert np.all(table.arrays["diagnostics/inside_hits"] <= 1e-4 * table.arrays["diagnostics/segments"])
+
+
+def test_compare_judges_the_base_term_alone(simulate, tmp_path, capsys):
+    """``compare --order 1-base`` reads brdf_order1_base and albedo_order1_base: the pore term
+    V_p f_B of the model (grains of albedo 0) matches it; a table without a base is refused in one
+    line, exit status 2."""
+    from microsim.cli import main
+
+    base = {"kind": "lambert", "albedo": 0.5}
+    with_base = simulate(micrograin_config((0.5, 1.0, 1.0), {"kind": "absorber"}, base=base, theta=[30.0],
+                                           paths=400_000, realizations=32))
+    args = ["compare", str(with_base.path), "--model", "micrograin", "--order", "1-base", "--json",
+            "--param", "tau0=0.5", "--param", "beta=1", "--param", "material=lambert", "--param", "albedo=0",
+            "--param", "base=lambert", "--param", "base_albedo=0.5"]
+    assert main(args) == 0
+    row = json.loads(capsys.readouterr().out)["per_incidence"][0]
+    assert abs(row["albedo_model"] - row["albedo_sim"]) <= 4 * row["albedo_sim_stderr"]
+    assert row["albedo_sim"] == pytest.approx(with_base.arrays["albedo_order1_base"][0])
+    plane = simulate({"scene": {"kind": "plane"}, "material": LAMBERT, "illumination": {"theta_i_deg": [30.0]},
+                      "sensor": {"cells": 20}, "run": {"paths": 1000, "realizations": 2}})
+    assert main(["compare", str(plane.path), "--model", "lambert", "--param", "albedo=0.5", "--order", "1-base"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "has no brdf_order1_base" in err[0]
