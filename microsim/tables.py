@@ -119,22 +119,14 @@ def write(path: str | Path, result, config, overwrite: bool = False) -> Path:
             _store(h5, "sensor/projected_solid_angle", sensor.projected_solid_angle())
             _store(h5, "sensor/ring_counts", sensor.ring_counts)
             h5["sensor"].attrs["cells_requested"] = plan.sensor_cells
-            brdf = result.brdf
-            _store(h5, "brdf", np.stack([e.mean[RESULT_ALL_ORDERS] for e in brdf]))
-            _store(h5, "brdf_stderr", np.stack([e.stderr[RESULT_ALL_ORDERS] for e in brdf]))
-            _store(h5, "brdf_order", np.stack([e.mean[:ORDERS] for e in brdf]))
-            _store(h5, "brdf_order_stderr", np.stack([e.stderr[:ORDERS] for e in brdf]))
-            if plan.scene.get("base", "none") != "none":
-                _store(h5, "brdf_order1_base", np.stack([e.mean[RESULT_ORDER1_BASE] for e in brdf]))
-                _store(h5, "brdf_order1_base_stderr", np.stack([e.stderr[RESULT_ORDER1_BASE] for e in brdf]))
-            albedo = result.albedo
-            _store(h5, "albedo", np.array([a.mean[RESULT_ALL_ORDERS] for a in albedo]))
-            _store(h5, "albedo_stderr", np.array([a.stderr[RESULT_ALL_ORDERS] for a in albedo]))
-            _store(h5, "albedo_order", np.stack([a.mean[:ORDERS] for a in albedo]))
-            _store(h5, "albedo_order_stderr", np.stack([a.stderr[:ORDERS] for a in albedo]))
-            if plan.scene.get("base", "none") != "none":
-                _store(h5, "albedo_order1_base", np.array([a.mean[RESULT_ORDER1_BASE] for a in albedo]))
-                _store(h5, "albedo_order1_base_stderr", np.array([a.stderr[RESULT_ORDER1_BASE] for a in albedo]))
+            has_base = plan.scene.get("base", "none") != "none"
+            for name, estimates in (("brdf", result.brdf), ("albedo", result.albedo)):
+                rows = {"": RESULT_ALL_ORDERS, "_order": slice(0, ORDERS)}
+                if has_base:
+                    rows["_order1_base"] = RESULT_ORDER1_BASE
+                for suffix, row in rows.items():
+                    _store(h5, name + suffix, np.stack([e.mean[row] for e in estimates]))
+                    _store(h5, f"{name}{suffix}_stderr", np.stack([e.stderr[row] for e in estimates]))
             for j, name in enumerate((*ENERGY_NAMES, "balance")):
                 _store(h5, f"energy/{name}", np.array([e.mean[j] for e in result.energy]))
                 _store(h5, f"energy/{name}_stderr", np.array([e.stderr[j] for e in result.energy]))
