@@ -8,6 +8,19 @@ def chi2_bound(n_cells: int, realizations: int) -> float:
     freedom (a standard error from R realizations): mean nu / (nu - 2), variance of z^2
     2 nu^2 (nu - 1) / ((nu - 2)^2 (nu - 4)), plus 5 standard deviations of the mean. For the
     difference of two such tables (Welch, about 2 (R - 1) degrees of freedom) it is conservative."""
+    mean, spread = _mean_z2(n_cells, realizations)
+    return mean + spread
+
+
+def chi2_lower_bound(n_cells: int, realizations: int) -> float:
+    """The same mean z^2 minus 5 standard deviations of the mean: a table whose standard errors are
+    too large (a mean z^2 far below 1) falls under it, so that "consistent with 1" is two-sided."""
+    mean, spread = _mean_z2(n_cells, realizations)
+    return mean - spread
+
+
+def _mean_z2(n_cells: int, realizations: int) -> tuple[float, float]:
+    """(expected mean z^2, 5 standard deviations of the mean) over n Student-t cells."""
     nu = realizations - 1
     variance = 2 * nu**2 * (nu - 1) / ((nu - 2) ** 2 * (nu - 4))
-    return nu / (nu - 2) + 5 * math.sqrt(variance / n_cells)
+    return nu / (nu - 2), 5 * math.sqrt(variance / n_cells)

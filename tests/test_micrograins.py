@@ -5,9 +5,10 @@ Single scattering (acceptance b, c). With ``max_order = 1`` the table's order 1 
 single scattering of the explicit field, which is what the fully-correlated model (Eq. 20-23)
 claims to be for Lambertian and conductor grains. Each case is checked over the cells with
 signal (table > 3 standard errors) by the mean z^2 per cell, bounded by
-``stat_bounds.chi2_bound(cells, R)``: each z is Student-t with R - 1 degrees of freedom (a
-standard error from R realizations), so the mean z^2 is about (R - 1) / (R - 3), and the bound
-adds 5 standard deviations of that mean. Cells of one realization share its geometry, so their
+``stat_bounds.chi2_bound(cells, R)`` above and ``chi2_lower_bound`` below (standard errors too
+large would pass an upper bound alone): each z is Student-t with R - 1 degrees of freedom (a
+standard error from R realizations), so the mean z^2 is about (R - 1) / (R - 3), and the bounds
+add and take 5 standard deviations of that mean. Cells of one realization share its geometry, so their
 z's are correlated and the mean z^2 spreads more than for independent cells; at grazing
 incidence the base term is dominated by a few gaps between grains, whose realization means are
 skewed: with 32 realizations the base term at theta_i = 86 deg (tau0 = 0.6, beta = 0.5) came out
@@ -29,7 +30,7 @@ from microsim import config, models
 from microsim.shapes import ELLIPSOID
 from microsim.compare import cell_averages
 from microsim.sensor import Sensor
-from stat_bounds import chi2_bound
+from stat_bounds import chi2_bound, chi2_lower_bound
 
 CONDUCTOR = {"kind": "conductor", "eta": 1.0152, "k": 6.6273}
 LAMBERT = {"kind": "lambert", "albedo": 0.5}
@@ -207,7 +208,8 @@ def test_order_1_equals_the_correlated_model(single_tables, grain, field):
         modelled, _ = cell_averages(model, table.sensor, wi, stderr[i])
         cells, chi2, median = agreement(order_1[i], stderr[i], modelled)
         assert cells >= 0.5 * table.sensor.n_cells
-        assert chi2 <= chi2_bound(cells, 64), (np.degrees(table.theta_i[i]), np.degrees(table.phi_i[i]), chi2)
+        angles = (np.degrees(table.theta_i[i]), np.degrees(table.phi_i[i]), chi2)
+        assert chi2_lower_bound(cells, 64) <= chi2 <= chi2_bound(cells, 64), angles
         assert median <= 0.02, (np.degrees(table.theta_i[i]), np.degrees(table.phi_i[i]), median)
 
 
@@ -269,7 +271,7 @@ def test_base_term_equals_pore_visibility_times_the_base_brdf(simulate, field):
         modelled, _ = cell_averages(base_term, table.sensor, wi, stderr[i])
         cells, chi2, _ = agreement(sim[i], stderr[i], modelled)
         if cells:
-            assert chi2 <= chi2_bound(cells, 256), (np.degrees(table.theta_i[i]), chi2)
+            assert chi2_lower_bound(cells, 256) <= chi2 <= chi2_bound(cells, 256), (np.degrees(table.theta_i[i]), chi2)
         albedo = sim[i] @ table.projected_solid_angle
         albedo_se = table.arrays["albedo_order_stderr"][i, 0]
         assert abs(albedo - modelled @ table.projected_solid_angle) <= 4 * albedo_se + 1e-12
@@ -298,35 +300,58 @@ RECIPROCITY_CELLS = 675
 RINGS = (2, 4, 8, 10, 13)
 
 
-@pytest.mark.slow
-def test_anisotropic_table_is_reciprocal(simulate):
-    """f(a -> b) = f(b -> a), within 4.5 combined standard errors for every pair of matching cells:
-    incidences at ring centres and phi_i in {0, 90} deg, on an anisotropic field, all orders."""
+@pytest.fixture(scope="module")
+def reciprocity_table(tmp_path_factory):
+    """All orders on an anisotropic field, incidences at ring centres x phi_i in {0, 90} deg."""
+    from microsim import runner, tables
+
     sensor = Sensor.build(RECIPROCITY_CELLS)
     theta = np.degrees(sensor.ring_centres()[list(RINGS)])
     incidences = [(ring, t, phi) for ring, t in zip(RINGS, theta) for phi in (0.0, 90.0)]
-    table = simulate(micrograin_config((0.5, 0.5, 2.0), {"kind": "lambert", "albedo": 0.8},
-                                       base={"kind": "lambert", "albedo": 0.5},
-                                       theta=[t for _, t, _ in incidences], phi=[p for _, _, p in incidences],
-                                       paths=400_000, realizations=16, max_order=0, cells=RECIPROCITY_CELLS),
-                     workers=2)
-    assert np.all(table.brdf_stderr > 0)
+    cfg = config.validate(micrograin_config((0.5, 0.5, 2.0), {"kind": "lambert", "albedo": 0.8},
+                                            base={"kind": "lambert", "albedo": 0.5},
+                                            theta=[t for _, t, _ in incidences], phi=[p for _, _, p in incidences],
+                                            paths=400_000, realizations=16, max_order=0, cells=RECIPROCITY_CELLS))
+    path = tmp_path_factory.mktemp("reciprocity") / "table.h5"
+    tables.write(path, runner.run(cfg, workers=2), cfg)
+    return tables.load(path), incidences
+
+
+def reciprocity_z(table, incidences, value, stderr):
+    """|value(a -> b) - value(b -> a)| / combined standard error, for every pair of incidences a < b
+    (the cell of b's ring at b's azimuth seen from a, and the reverse)."""
+    sensor = table.sensor
 
     def cell_at(ring, phi):
-        count = int(sensor.ring_counts[ring])
-        j = Fraction(phi / 360.0) * count
+        j = Fraction(phi / 360.0) * int(sensor.ring_counts[ring])
         assert j.denominator == 1
         return sensor.ring_start[ring] + int(j)
 
     z = []
     for a, (ring_a, _, phi_a) in enumerate(incidences):
-        for b, (ring_b, _, phi_b) in enumerate(incidences):
-            if b > a:
-                forward, backward = table.brdf[a, cell_at(ring_b, phi_b)], table.brdf[b, cell_at(ring_a, phi_a)]
-                se = np.hypot(table.brdf_stderr[a, cell_at(ring_b, phi_b)], table.brdf_stderr[b, cell_at(ring_a, phi_a)])
-                z.append(abs(forward - backward) / se)
+        for b, (ring_b, _, phi_b) in enumerate(incidences[a + 1:], start=a + 1):
+            forward, backward = (a, cell_at(ring_b, phi_b)), (b, cell_at(ring_a, phi_a))
+            z.append(abs(value[forward] - value[backward]) / np.hypot(stderr[forward], stderr[backward]))
+    return np.array(z)
+
+
+@pytest.mark.slow
+def test_anisotropic_table_is_reciprocal(reciprocity_table):
+    """f(a -> b) = f(b -> a), within 4.5 combined standard errors for every pair of matching cells."""
+    table, incidences = reciprocity_table
+    assert np.all(table.brdf_stderr > 0)
+    z = reciprocity_z(table, incidences, table.brdf, table.brdf_stderr)
     assert len(z) == 45
-    assert max(z) <= 4.5
+    assert z.max() <= 4.5
+
+
+@pytest.mark.slow
+def test_a_non_reciprocal_quantity_is_detected(reciprocity_table):
+    """Power of the check: f cos(theta_o) is not reciprocal, and the same comparison rejects it."""
+    table, incidences = reciprocity_table
+    t_lo, t_hi = table.sensor.cell_bounds()[:2]
+    mu = np.cos(0.5 * (t_lo + t_hi))
+    assert reciprocity_z(table, incidences, table.brdf * mu, table.brdf_stderr * mu).max() > 4.5
 
 
 # ---------------------------------------------------------------- f: robustness
