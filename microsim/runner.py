@@ -39,7 +39,8 @@ import geometry
 from .frames import direction
 from . import embree, integrators
 from .integrators import fused, wavefront
-from .integrators.records import BASE_ROW, COUNT_NAMES, ENERGY_NAMES, ORDERS, RESULT_ALL_ORDERS, TALLY_ROWS
+from .integrators.records import BASE_ROW, COUNT_NAMES, ENERGY_NAMES, ORDERS, RESULT_ALL_ORDERS, RESULT_ROWS, \
+    TALLY_ROWS
 from .rng import geometry_rng, stream_key
 from .sensor import Sensor
 
@@ -165,9 +166,9 @@ class Result:
 
     plan: Plan
     sensor: Sensor
-    brdf: list  # per incidence: Estimate of f_C over (ORDERS + 2, n_cells): the orders, all orders
+    brdf: list  # per incidence: Estimate of f_C over (RESULT_ROWS, n_cells): the orders, all orders
     #             (row RESULT_ALL_ORDERS), order 1 scattered by the base (row RESULT_ORDER1_BASE)
-    albedo: list  # per incidence: Estimate over (ORDERS + 2,), rows as brdf's
+    albedo: list  # per incidence: Estimate over (RESULT_ROWS,), rows as brdf's
     energy: list  # per incidence: Estimate over (*ENERGY_NAMES, balance)
     counts: np.ndarray  # (n_incidences, len(COUNT_NAMES)) tracer event counts
     scene_info: dict = field(default_factory=dict)  # realization -> info of the generated scene
@@ -186,8 +187,8 @@ class _Reducer:
         self.plan = plan
         self.result = Result(
             plan, sensor,
-            [Estimate.zeros((ORDERS + 2, n_c)) for _ in range(n_i)],
-            [Estimate.zeros(ORDERS + 2) for _ in range(n_i)],
+            [Estimate.zeros((RESULT_ROWS, n_c)) for _ in range(n_i)],
+            [Estimate.zeros(RESULT_ROWS) for _ in range(n_i)],
             [Estimate.zeros(len(ENERGY_NAMES) + 1) for _ in range(n_i)],
             np.zeros((n_i, len(COUNT_NAMES)), np.int64),
         )
@@ -263,7 +264,7 @@ def memory_estimate(plan: Plan, sensor: Sensor, workers: int) -> int:
     tracing = plan.generator.scene_bytes(plan.scene) + paths + 2 * tally
     units = len(plan.units)
     processes = len(split(plan.units, max(1, workers)))
-    reducing = 3 * plan.n_incidences * (ORDERS + 2) * sensor.n_cells * 8 + units * tally * (processes - 1) // processes
+    reducing = 3 * plan.n_incidences * RESULT_ROWS * sensor.n_cells * 8 + units * tally * (processes - 1) // processes
     workers_bytes = WORKER_BYTES * processes if processes > 1 else 0
     return PROCESS_BYTES + workers_bytes + tracing * processes + reducing
 

@@ -22,9 +22,10 @@ ORDERS = 4
 #: (CONVENTIONS 6, ``brdf_order1_base``); rows 0 .. ORDERS-1 are the orders, all surfaces
 BASE_ROW = ORDERS
 TALLY_ROWS = ORDERS + 1
-#: rows of a run's per-incidence BRDF estimate (``runner.Result.brdf``) after the orders: all
-#: orders, then order 1 scattered by the base
+#: rows of a run's per-incidence BRDF and albedo estimates (``runner.Result``) after the orders:
+#: all orders, then order 1 scattered by the base
 RESULT_ALL_ORDERS, RESULT_ORDER1_BASE = ORDERS, ORDERS + 1
+RESULT_ROWS = ORDERS + 2
 
 #: what a path carries from segment to segment: name -> dtype (one row per path)
 PATH_FIELDS = {
@@ -45,7 +46,8 @@ Rays = namedtuple("Rays", ["origin", "direction", "tfar", "end"])
 Beam = namedtuple("Beam", ["wi", "key", "n_paths", "max_order"])
 
 #: what a batch of paths produced, sums of weights not yet divided by ``paths``: exits per order
-#: and sensor cell, then order 1 from the base alone (TALLY_ROWS, n_cells), lost energy (ENERGY_NAMES) and event counts (COUNT_NAMES)
+#: and sensor cell, then order 1 from the base alone (TALLY_ROWS, n_cells), lost energy
+#: (ENERGY_NAMES) and event counts (COUNT_NAMES)
 Tally = namedtuple("Tally", ["paths", "exit_weight", "energy", "counts"])
 
 #: indices of ``Tally.energy``
