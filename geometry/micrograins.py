@@ -71,8 +71,8 @@ from microsim.scene import Scene, SceneBuilder
 from microsim.schema import Section
 from microsim.shapes import Shapes
 
-from .poisson_spheres import EXACT_SPHERE_BYTES, FALLBACK_MESH_ERROR, MAX_SUBDIVISIONS, TRIANGLE_BYTES, \
-    level_for, periodic_images, unit_icosphere
+from .poisson_spheres import EXACT_SPHERE_BYTES, MAX_SUBDIVISIONS, TRIANGLE_BYTES, is_exact, level_for, \
+    meshed_on_embreex, periodic_images, unit_icosphere
 
 KIND = "micrograins"
 INTEGRATOR = "surface"
@@ -131,18 +131,10 @@ def check(config) -> None:
         raise ValueError("scene.mesh_error: give either subdivisions or mesh_error, not both")
 
 
-def is_exact(scene) -> bool:
-    return scene.subdivisions is None and scene.mesh_error is None
-
-
 def for_backend(config, backend: str):
     """(config, note): exact grains are native spheres in a scaled frame, which the embreex
-    backend cannot trace: there they become icospheres within FALLBACK_MESH_ERROR."""
-    if backend == "embreex" and is_exact(config.scene):
-        meshed = config.scene.model_copy(update={"mesh_error": FALLBACK_MESH_ERROR})
-        return (config.model_copy(update={"scene": meshed}),
-                f"exact grains traced as icospheres within mesh_error {FALLBACK_MESH_ERROR} (embreex traces triangles)")
-    return config, ""
+    backend cannot trace: there they become icospheres."""
+    return meshed_on_embreex(config, backend, "grains")
 
 
 def default_tile(beta_x: float, beta_y: float, theta_max_deg: float, density: float) -> tuple[float, bool]:

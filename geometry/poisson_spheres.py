@@ -83,17 +83,23 @@ def check(config) -> None:
 
 def for_backend(config, backend: str):
     """(config, note): the config as ``backend`` can trace it. Exact spheres are Embree's native
-    primitive, which the embreex backend cannot trace: there they become icospheres within
-    FALLBACK_MESH_ERROR, and the note says so."""
+    primitive, which the embreex backend cannot trace: there they become icospheres."""
+    return meshed_on_embreex(config, backend, "spheres")
+
+
+def meshed_on_embreex(config, backend: str, what: str):
+    """(config, note): on the embreex backend, which traces triangles only, a scene of exact native
+    spheres (``is_exact``) is given ``mesh_error = FALLBACK_MESH_ERROR``, and the note says so; on
+    the direct backend the config is traced as it is. Shared by the scenes made of spheres."""
     if backend == "embreex" and is_exact(config.scene):
         meshed = config.scene.model_copy(update={"mesh_error": FALLBACK_MESH_ERROR})
         return (config.model_copy(update={"scene": meshed}),
-                f"exact spheres traced as icospheres within mesh_error {FALLBACK_MESH_ERROR} (embreex traces triangles)")
+                f"exact {what} traced as icospheres within mesh_error {FALLBACK_MESH_ERROR} (embreex traces triangles)")
     return config, ""
 
 
 def is_exact(scene) -> bool:
-    """Whether the spheres are Embree's exact native spheres (no tessellation asked for)."""
+    """Whether the spheres (or grains) are Embree's exact native spheres (no tessellation asked for)."""
     return scene.subdivisions is None and scene.mesh_error is None
 
 
