@@ -20,7 +20,6 @@ plus model error: the path counts are chosen so that the noise alone sits near 1
 from __future__ import annotations
 
 import json
-from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -29,7 +28,7 @@ import geometry
 from microsim import config, models
 from microsim.shapes import ELLIPSOID
 from microsim.compare import cell_averages
-from microsim.sensor import Sensor
+from matching_cells import RECIPROCITY_CELLS, reciprocity_z, ring_incidences
 from stat_bounds import chi2_bound, chi2_lower_bound
 
 CONDUCTOR = {"kind": "conductor", "eta": 1.0152, "k": 6.6273}
@@ -294,20 +293,12 @@ def test_white_furnace_returns_every_path(simulate, tau0, beta):
 
 # ---------------------------------------------------------------- e: reciprocity
 
-#: a sensor whose rings below have cell counts divisible by 4 (12, 24, 44, 52, 60 cells): each has
-#: cells centred at azimuths 0 and 90 deg, where the incidences are
-RECIPROCITY_CELLS = 675
-RINGS = (2, 4, 8, 10, 13)
-
-
 @pytest.fixture(scope="module")
 def reciprocity_table(tmp_path_factory):
     """All orders on an anisotropic field, incidences at ring centres x phi_i in {0, 90} deg."""
     from microsim import runner, tables
 
-    sensor = Sensor.build(RECIPROCITY_CELLS)
-    theta = np.degrees(sensor.ring_centres()[list(RINGS)])
-    incidences = [(ring, t, phi) for ring, t in zip(RINGS, theta) for phi in (0.0, 90.0)]
+    incidences = ring_incidences()
     cfg = config.validate(micrograin_config((0.5, 0.5, 2.0), {"kind": "lambert", "albedo": 0.8},
                                             base={"kind": "lambert", "albedo": 0.5},
                                             theta=[t for _, t, _ in incidences], phi=[p for _, _, p in incidences],
@@ -315,24 +306,6 @@ def reciprocity_table(tmp_path_factory):
     path = tmp_path_factory.mktemp("reciprocity") / "table.h5"
     tables.write(path, runner.run(cfg, workers=2), cfg)
     return tables.load(path), incidences
-
-
-def reciprocity_z(table, incidences, value, stderr):
-    """|value(a -> b) - value(b -> a)| / combined standard error, for every pair of incidences a < b
-    (the cell of b's ring at b's azimuth seen from a, and the reverse)."""
-    sensor = table.sensor
-
-    def cell_at(ring, phi):
-        j = Fraction(phi / 360.0) * int(sensor.ring_counts[ring])
-        assert j.denominator == 1
-        return sensor.ring_start[ring] + int(j)
-
-    z = []
-    for a, (ring_a, _, phi_a) in enumerate(incidences):
-        for b, (ring_b, _, phi_b) in enumerate(incidences[a + 1:], start=a + 1):
-            forward, backward = (a, cell_at(ring_b, phi_b)), (b, cell_at(ring_a, phi_a))
-            z.append(abs(value[forward] - value[backward]) / np.hypot(stderr[forward], stderr[backward]))
-    return np.array(z)
 
 
 @pytest.mark.slow

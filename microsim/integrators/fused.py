@@ -100,20 +100,35 @@ class FusedBackend:
         self.ray_log = np.zeros((0, 7), np.float32)
 
     def trace(self, beam, scene, sensor):
-        n_chunks = math.ceil(beam.n_paths / CHUNK_PATHS)
-        wave_chunks = WAVE_CHUNKS_PER_THREAD * self.threads
-        work = workspace(min(wave_chunks, max(n_chunks, 1)), sensor.n_cells, self.log_rays)
-        total = empty_tally(beam.n_paths, sensor.n_cells)
+        work = workspace(wave_rows(beam.n_paths, self.threads), sensor.n_cells, self.log_rays)
         handle = self.embree.arrays()
-        with ThreadPoolExecutor(self.threads) as pool:
-            for first in range(0, n_chunks, wave_chunks):
-                count = min(wave_chunks, n_chunks - first)
-                edges = np.linspace(0, count, self.threads + 1).round().astype(np.int64)
-                shares = [(first, int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
-                list(pool.map(lambda share: trace_chunks(*share, beam, scene, handle, sensor, work), shares))
-                add_chunks(total, work, count)
+        total = trace_in_waves(beam.n_paths, sensor.n_cells, self.threads, work,
+                               lambda *share: trace_chunks(*share, beam, scene, handle, sensor, work))
         self.ray_log = work.log[:min(work.logged[0], len(work.log))]
         return total
+
+
+def wave_rows(n_paths: int, threads: int) -> int:
+    """Chunk rows a workspace needs for ``n_paths`` paths on ``threads`` threads: one wave's chunks."""
+    return min(WAVE_CHUNKS_PER_THREAD * threads, max(math.ceil(n_paths / CHUNK_PATHS), 1))
+
+
+def trace_in_waves(n_paths: int, n_cells: int, threads: int, work: Workspace, trace_share):
+    """The tally of ``n_paths`` paths cut into chunks of CHUNK_PATHS, traced in waves of
+    :func:`wave_rows` chunks on ``threads`` threads: ``trace_share(first, start, stop)`` traces
+    chunks first+start .. first+stop-1 into the tally rows start .. stop-1 of ``work``, releasing
+    the GIL; each wave's rows are added in chunk order (:func:`add_chunks`)."""
+    n_chunks = math.ceil(n_paths / CHUNK_PATHS)
+    wave_chunks = WAVE_CHUNKS_PER_THREAD * threads
+    total = empty_tally(n_paths, n_cells)
+    with ThreadPoolExecutor(threads) as pool:
+        for first in range(0, n_chunks, wave_chunks):
+            count = min(wave_chunks, n_chunks - first)
+            edges = np.linspace(0, count, threads + 1).round().astype(np.int64)
+            shares = [(first, int(a), int(b)) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+            list(pool.map(lambda share: trace_share(*share), shares))
+            add_chunks(total, work, count)
+    return total
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
@@ -121,13 +136,19 @@ def trace_chunks(first, start, stop, beam, scene, handle, sensor, work):
     """Trace chunks first+start .. first+stop-1 of the beam to completion, chunk first+j into tally
     row j, its path slots in rows SLOTS j and on (see :func:`trace_chunk`)."""
     for j in range(start, stop):
-        tally = Tally(0, work.exit_weight[j], work.energy[j], work.counts[j])
-        tally.exit_weight[:] = 0.0
-        tally.energy[:] = 0.0
-        tally.counts[:] = 0
         chunk = first + j
         trace_chunk(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths), SLOTS * j, beam, scene, handle,
-                    sensor, work, tally)
+                    sensor, work, chunk_tally(work, j))
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def chunk_tally(work, j):
+    """Tally row j of the workspace, zeroed: where chunk j of a wave adds its paths."""
+    tally = Tally(0, work.exit_weight[j], work.energy[j], work.counts[j])
+    tally.exit_weight[:] = 0.0
+    tally.energy[:] = 0.0
+    tally.counts[:] = 0
+    return tally
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

@@ -16,6 +16,11 @@ Distributions (``roughness_x``, ``roughness_y`` act along the x and y axes of th
   radians, C from a deterministic quadrature. Small-angle equivalent Beckmann alpha =
   sqrt(2) sigma (Eq. 13 text).
 
+Sampling: :func:`sample` maps uniform numbers (xi1, xi2) to facet normals of density
+D(m)(m.n) by a smooth bijection (the models' deterministic quadratures);
+:func:`sample_slope` draws the facet slope of that density in numba, one path at a time (the
+V-cavity tracer, :mod:`microsim.integrators.vcavity`).
+
 GAFs: ``smith`` (separable G1(i) G1(o), Eq. 16-18), ``smith_height_correlated``
 (1 / (1 + Lambda(i) + Lambda(o)), the height-correlated Smith form of Heitz 2014) and
 ``torrance_sparrow`` (V-cavities, Eq. 14). Smith's Lambda is exact for each distribution: closed forms for Beckmann (Eq. 19)
@@ -43,6 +48,8 @@ import math
 import numba
 import numpy as np
 from scipy.special import erfc
+
+from ..rng import uniform
 
 DISTRIBUTIONS = ("beckmann", "ggx", "gaussian")
 GAFS = ("smith", "smith_height_correlated", "torrance_sparrow")
@@ -285,6 +292,38 @@ def sample(distribution: str, roughness_x: float, roughness_y: float, xi1, xi2) 
         cos_t = 1.0 / np.sqrt(1.0 + tan_t**2)
         sin_t = tan_t * cos_t
     return np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t], axis=-1)
+
+
+#: codes of DISTRIBUTIONS in numba kernels
+BECKMANN, GGX, GAUSSIAN = range(3)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def sample_slope(code, roughness_x, roughness_y, states, i):
+    """The slope (sx, sy) of a facet of normal m = (sx, sy, 1) / |(sx, sy, 1)| drawn with density
+    D(m)(m.n), from path i's random stream. Exact for each distribution:
+
+    - Beckmann, GGX: the map of :func:`sample` written on slopes. With psi = 2 pi xi2 the slope
+      is s (ax cos psi, ay sin psi), s^2 = -log(1 - xi1) (Beckmann: Gaussian slopes of variance
+      a^2 / 2 per axis) or xi1 / (1 - xi1) (GGX).
+    - gaussian (Eq. 13; density C exp(-theta^2 / (2 sigma^2)) sin(theta) in theta, uniform in
+      azimuth, theta below ``gaussian_theta_max``): rejection from the Rayleigh density
+      theta / sigma^2 exp(-theta^2 / (2 sigma^2)) (inverted in closed form), accepting with
+      probability sin(theta) / theta <= 1.
+    """
+    if code == GAUSSIAN:
+        top = min(0.5 * math.pi, GAUSSIAN_CUTOFF * roughness_x)
+        while True:
+            theta = roughness_x * math.sqrt(-2.0 * math.log1p(-uniform(states, i)))
+            if theta <= top and (theta == 0.0 or uniform(states, i) * theta <= math.sin(theta)):
+                break
+        psi = 2.0 * math.pi * uniform(states, i)
+        slope = math.tan(theta)
+        return slope * math.cos(psi), slope * math.sin(psi)
+    xi1 = uniform(states, i)
+    psi = 2.0 * math.pi * uniform(states, i)
+    s = math.sqrt(-math.log1p(-xi1) if code == BECKMANN else xi1 / (1.0 - xi1))
+    return s * roughness_x * math.cos(psi), s * roughness_y * math.sin(psi)
 
 
 def resolve_roughness(values: dict, allow_zero: bool = False) -> dict:

@@ -1,0 +1,222 @@
+"""The V-cavity tracer: each path in a groove of its own, traced in the groove's cross-section.
+
+A path draws its groove's facet slope from D(m)(m.n) (:func:`~microsim.models.distributions.sample_slope`;
+why this is the V-cavity surface exactly: :mod:`geometry.vcavities`), and enters the groove's
+aperture at a uniform point. In the cross-section, with u the horizontal unit vector of m and
+h = tan(theta_m), the groove is x in [-1, 1] above the two facet lines z = -h (x + 1) (the left
+facet, normal m = (sin theta_m u, cos theta_m)) and z = -h (1 - x) (the right one, normal m');
+a direction d moves the path by (d.u, d_z) per unit of the ray parameter t, whatever its
+component along the axis. The region is convex, so a ray leaves it where it first crosses one
+of its three sides going outwards: a facet (an interaction, shaded with the exact facet normal;
+the hit is put on the facet line) or the aperture z = 0 (the path leaves and is binned on the
+sensor by order, :func:`~microsim.integrators.events.exit_top`). Materials, roulette, truncation
+and tallies are those of every integrator (:mod:`.events`, :func:`microsim.materials.scatter`).
+
+Two ways to find that crossing (``intersector``), one path body:
+
+- :func:`meet_analytic`: the three crossings in float64; a ray leaving a facet moves inwards
+  across it, so it cannot meet it again, and nothing is offset.
+- :func:`meet_embree`: Embree's closest hit on the canonical groove (half-width 1, depth 1,
+  :data:`geometry.vcavities.CANONICAL_FACES`), the ray mapped by (x, z) -> (x, z / h) and its
+  axial motion dropped, so t is the world t; its origin is lifted 8 float32 spacings off the facet
+  it leaves (Embree works in float32). Rays can be logged, as on the fused backend, for the
+  benchmark's replay through Embree alone.
+
+Paths run to completion one at a time, in chunks on threads exactly as on the fused surface
+backend (:func:`microsim.integrators.fused.trace_in_waves`): a table is bit-identical for any
+number of threads.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from geometry.vcavities import CANONICAL_FACES, CANONICAL_VERTICES, LEFT_FACET_TRIANGLES
+
+from .. import embree
+from ..materials import scatter
+from ..models.distributions import sample_slope
+from ..rng import path_state, uniform
+from .events import exit_top, survives_interaction, truncate
+from .fused import CHUNK_PATHS, SLOTS, chunk_tally, trace_in_waves, wave_rows, workspace
+from .records import ABSORBED, SEGMENTS, TRUNCATED, Beam
+
+#: facets of a groove, as :func:`meet_analytic` and :func:`meet_embree` name them; NONE: no facet
+LEFT, RIGHT, NONE = 0, 1, -1
+#: a groove is never shallower than this (a facet drawn exactly flat: probability 2^-53)
+MIN_DEPTH = 1e-12
+#: the Embree query leaves a facet this far off it, in the canonical frame (8 float32 spacings of 1)
+EMBREE_OFFSET = 8.0 * 2.0**-23
+_SQRT_HALF = math.sqrt(0.5)
+
+
+class VCavityTracer:
+    """Traces batches of paths through V-cavities (:class:`geometry.vcavities.VCavities`) on
+    ``threads`` threads; ``backend`` is the run's Embree binding, used by the ``embree``
+    intersector only. ``log_rays`` > 0 (one thread, ``embree`` intersector) keeps the first
+    ``log_rays`` Embree queries in ``ray_log`` (rows of origin, direction, tfar)."""
+
+    def __init__(self, scene, sensor, backend: str = "direct", threads: int = 1, log_rays: int = 0):
+        if log_rays and (threads != 1 or scene.intersector != "embree"):
+            raise ValueError("the ray log keeps the Embree queries of one thread: give threads = 1 and the embree intersector")
+        self.scene, self.sensor, self.threads, self.log_rays = scene, sensor, threads, log_rays
+        self.embree = embree.Scene(CANONICAL_VERTICES, CANONICAL_FACES) if scene.intersector == "embree" else None
+        self.ray_log = np.zeros((0, 7), np.float32)
+
+    def trace(self, wi, n_paths: int, key, max_order: int):
+        """Trace ``n_paths`` paths arriving along -``wi`` on the random stream ``key``; see
+        :meth:`microsim.integrators.surface.SurfaceTracer.trace`."""
+        beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order)
+        grooves, sensor = self.scene.grooves, self.sensor
+        work = workspace(wave_rows(n_paths, self.threads), sensor.n_cells, self.log_rays)
+        if self.embree is None:
+            def share(first, start, stop):
+                trace_chunks_analytic(first, start, stop, beam, grooves, sensor, work)
+        else:
+            handle = self.embree.arrays()
+
+            def share(first, start, stop):
+                trace_chunks_embree(first, start, stop, beam, grooves, handle, sensor, work)
+        total = trace_in_waves(n_paths, sensor.n_cells, self.threads, work, share)
+        self.ray_log = work.log[:min(work.logged[0], len(work.log))]
+        return total
+
+    @classmethod
+    def compile(cls, sensor, backend: str = "direct", threads: int = 1) -> None:
+        """Compile (or load) both kernels before workers fork, tracing nothing (the Embree one only
+        where the library loads: its machine code links to rtcIntersect1 by name)."""
+        from geometry.vcavities import Grooves
+
+        beam = Beam(np.array([0.0, 0.0, 1.0]), np.uint64(0), 0, 0)
+        grooves = Grooves(0, 0.5, 0.5, 0, np.zeros(2))
+        work = workspace(1, sensor.n_cells)
+        trace_chunks_analytic(0, 0, 0, beam, grooves, sensor, work)
+        try:
+            embree.available()
+        except embree.EmbreeUnavailable:
+            return
+        handle = embree.SceneHandle(0, np.zeros(1, np.int64), np.ones(2))
+        trace_chunks_embree(0, 0, 0, beam, grooves, handle, sensor, work)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def trace_chunks_analytic(first, start, stop, beam, grooves, sensor, work):
+    """Chunks first+start .. first+stop-1 of the beam, chunk first+j into tally row j (:func:`meet_analytic`)."""
+    trace_chunks(first, start, stop, beam, grooves, sensor, work, meet_analytic, 0)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def trace_chunks_embree(first, start, stop, beam, grooves, handle, sensor, work):
+    """Chunks first+start .. first+stop-1 of the beam, chunk first+j into tally row j (:func:`meet_embree`)."""
+    trace_chunks(first, start, stop, beam, grooves, sensor, work, meet_embree, handle)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def trace_chunks(first, start, stop, beam, grooves, sensor, work, meet, handle):
+    for j in range(start, stop):
+        tally = chunk_tally(work, j)
+        chunk = first + j
+        for number in range(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths)):
+            trace_path(work, SLOTS * j, number, beam, grooves, sensor, tally, meet, handle)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def trace_path(work, row, number, beam, grooves, sensor, tally, meet, handle):
+    """Path ``number`` of the beam, in ``row`` of the workspace, from its groove's aperture until
+    it leaves, is absorbed or is truncated (module doc)."""
+    paths = work.paths
+    paths.rng[row] = path_state(beam.key, number)
+    paths.weight[row] = 1.0
+    paths.order[row] = 0
+    paths.idle[row] = 0
+    paths.from_base[row] = 0
+    sx, sy = sample_slope(grooves.distribution, grooves.roughness_x, grooves.roughness_y, paths.rng, row)
+    slope = math.sqrt(sx * sx + sy * sy)
+    cu, su = (sx / slope, sy / slope) if slope > 0.0 else (1.0, 0.0)
+    h = max(slope, MIN_DEPTH)
+    cos_m = 1.0 / math.sqrt(1.0 + h * h)
+    sin_m = h * cos_m
+    x, z = 2.0 * uniform(paths.rng, row) - 1.0, 0.0
+    d = (-beam.wi[0], -beam.wi[1], -beam.wi[2])
+    last = NONE
+    while True:
+        du = d[0] * cu + d[1] * su
+        dz = d[2]
+        facet, t = meet(handle, work, row, x, z, du, dz, h, last)
+        tally.counts[SEGMENTS] += 1
+        if facet == NONE:
+            if dz > 0.0:
+                exit_top(paths, row, d, sensor, tally)
+            else:  # along the axis, level: it meets neither a facet nor the aperture
+                truncate(paths, row, tally)
+            return
+        if beam.max_order > 0 and paths.order[row] >= beam.max_order:
+            truncate(paths, row, tally)
+            return
+        x = x + t * du
+        if facet == LEFT:
+            x = min(max(x, -1.0), 0.0)
+            z = -h * (x + 1.0)
+            n = (sin_m * cu, sin_m * su, cos_m)
+        else:
+            x = min(max(x, 0.0), 1.0)
+            z = -h * (1.0 - x)
+            n = (-sin_m * cu, -sin_m * su, cos_m)
+        d, factor, cut = scatter(grooves.material_code, grooves.material_params, paths.rng, row, d, n)
+        w = paths.weight[row]
+        tally.energy[ABSORBED] += w * (1.0 - factor - cut)
+        tally.energy[TRUNCATED] += w * cut
+        paths.weight[row] = w * factor
+        paths.order[row] += 1
+        if not survives_interaction(paths, row, tally):
+            return
+        last = facet
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def meet_analytic(handle, work, row, x, z, du, dz, h, last):
+    """(facet or NONE, t) where the ray from (x, z) moving by (du, dz) leaves the groove's
+    cross-section: the smallest t at which it crosses a side going outwards (module doc)."""
+    t, facet = math.inf, NONE
+    if dz > 0.0:
+        t = -z / dz
+    rate = dz + h * du  # d/dt of z + h (x + 1), >= 0 above the left facet
+    if rate < 0.0:
+        reach = max(z + h * (x + 1.0), 0.0) / -rate
+        if reach < t:
+            t, facet = reach, LEFT
+    rate = dz - h * du  # d/dt of z + h (1 - x), >= 0 above the right facet
+    if rate < 0.0:
+        reach = max(z + h * (1.0 - x), 0.0) / -rate
+        if reach < t:
+            t, facet = reach, RIGHT
+    return facet, t
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def meet_embree(handle, work, row, x, z, du, dz, h, last):
+    """:func:`meet_analytic` by Embree on the canonical groove (module doc)."""
+    cz, cdz = z / h, dz / h
+    if last == LEFT:
+        x, cz = x + EMBREE_OFFSET * _SQRT_HALF, cz + EMBREE_OFFSET * _SQRT_HALF
+    elif last == RIGHT:
+        x, cz = x - EMBREE_OFFSET * _SQRT_HALF, cz + EMBREE_OFFSET * _SQRT_HALF
+    tfar = -cz / cdz if cdz > 0.0 else math.inf
+    records = work.records
+    embree.set_ray(records[row], (x, 0.0, cz), (du, 0.0, cdz), tfar)
+    if len(work.log):
+        k = work.logged[0]
+        work.logged[0] = k + 1
+        if k < len(work.log):
+            record = records[row]
+            work.log[k, 0], work.log[k, 1], work.log[k, 2] = record.org_x, record.org_y, record.org_z
+            work.log[k, 3], work.log[k, 4], work.log[k, 5] = record.dir_x, record.dir_y, record.dir_z
+            work.log[k, 6] = record.tfar
+    embree.trace(handle.handle, records, row)
+    record = records[row]
+    if record.geomID == embree.INVALID_ID:
+        return NONE, 0.0
+    return (LEFT if record.primID < LEFT_FACET_TRIANGLES else RIGHT), np.float64(record.tfar)
