@@ -204,7 +204,7 @@ def chart_a(rows) -> Path:
     plt = _pyplot()
     from matplotlib import colors
 
-    from microsim.plots import _polar_cells
+    from microsim.plots import polar_cells
 
     columns = ("simulation (order 1)", "correlated (Eq. 18)", "uncorrelated (Eq. 17)",
                "(correlated - sim) / sim", "(uncorrelated - sim) / sim")
@@ -226,7 +226,7 @@ def chart_a(rows) -> Path:
                   (rel["uncorrelated"], error_norm, plt.cm.RdBu_r))
         for c, (ax, (values, norm, cmap)) in enumerate(zip(axes[r], panels)):
             shown = np.clip(values, norm.vmin, None) if norm is value_norm else values
-            _polar_cells(ax, table.sensor, shown, cmap, norm)
+            polar_cells(ax, table.sensor, shown, cmap, norm)
             ax.plot([0.0], [GRAZING_DEG], marker="*", color="red", ms=10, mec="white", zorder=5, clip_on=False)
             if c == 0:
                 title = (f"tau0 = {row['tau0']:g}, beta_x = {row['beta_x']:g}, beta_y = {row['beta_y']:g}\n"

@@ -141,8 +141,9 @@ def run(config_path, out, workers, threads, backend, paths, seed, force):
 @click.option("--model", "model_name", required=True, help="analytic model (see `microsim models`)")
 @click.option("--param", "params", multiple=True, metavar="KEY=VALUE", help="model parameter, repeatable")
 @click.option("--order", type=click.Choice(list(ORDER_ROWS)), default="all", show_default=True,
-              help="compare with one scattering order of the table, or with the part of order 1 that the "
-                   "base scattered (1-base; scenes with a base)")
+              help="compare with one scattering order of the table, orders 1 and 2 together (1+2, the "
+                   "f2 of two-bounce models), or the part of order 1 that the base scattered (1-base; "
+                   "scenes with a base)")
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object")
 @click.option("--plot", "plot_dir", type=click.Path(file_okay=False, path_type=Path),
               help="write PNG figures (polar maps, plane of incidence) into this directory")

@@ -30,7 +30,9 @@ SIGNAL_TO_NOISE = 3.0
 #: --order choice -> row of the table's brdf_order (None: all orders, the table's brdf; BASE: the
 #: part of order 1 scattered by the base, brdf_order1_base, in tables of scenes with a base)
 BASE = "base"
-ORDER_ROWS = {"all": None, "1": 0, "2": 1, "3": 2, "4+": 3, "1-base": BASE}
+#: orders 1 and 2 together, brdf_orders12 (the f2 of interfaced_lambertian_microfacets.txt Sec. 3.3)
+ORDERS12 = "orders12"
+ORDER_ROWS = {"all": None, "1": 0, "2": 1, "3": 2, "4+": 3, "1+2": ORDERS12, "1-base": BASE}
 
 
 @dataclass
@@ -120,6 +122,9 @@ def compare(table, model, order: str = "all") -> Comparison:
     if row == BASE and not {"brdf_order1_base", "albedo_order1_base"} <= table.arrays.keys():
         raise ValueError(f"--order 1-base: table {table.path} has no brdf_order1_base and albedo_order1_base "
                          "(its scene has no base, or it was written before they existed)")
+    if row == ORDERS12 and not {"brdf_orders12", "albedo_orders12"} <= table.arrays.keys():
+        raise ValueError(f"--order 1+2: table {table.path} has no brdf_orders12 and albedo_orders12 "
+                         "(it was written before they existed)")
     names, sim, stderr, albedo_sim, albedo_se = _selected(table, row)
     for name, values in zip(names, (sim, stderr)):
         _require_finite(values, f"table {table.path}: {name} (order {order})")
@@ -140,9 +145,10 @@ def _selected(table, row):
     a = table.arrays
     if row is None:
         return ("brdf", "brdf_stderr"), table.brdf, table.brdf_stderr, table.albedo, table.albedo_stderr
-    if row == BASE:
-        return (("brdf_order1_base", "brdf_order1_base_stderr"), a["brdf_order1_base"], a["brdf_order1_base_stderr"],
-                a["albedo_order1_base"], a["albedo_order1_base_stderr"])
+    if row in (BASE, ORDERS12):
+        name = "order1_base" if row == BASE else "orders12"
+        return ((f"brdf_{name}", f"brdf_{name}_stderr"), a[f"brdf_{name}"], a[f"brdf_{name}_stderr"],
+                a[f"albedo_{name}"], a[f"albedo_{name}_stderr"])
     return (("brdf_order", "brdf_order_stderr"), table.brdf_order[:, row, :], a["brdf_order_stderr"][:, row, :],
             a["albedo_order"][:, row], a["albedo_order_stderr"][:, row])
 

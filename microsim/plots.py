@@ -22,7 +22,7 @@ def _pyplot():
 RING_PIECES = 96
 
 
-def _polar_cells(ax, sensor, values, cmap, norm):
+def polar_cells(ax, sensor, values, cmap, norm):
     """Draw every sensor cell on polar axes (angle = phi, radius = theta in degrees): one
     pcolormesh per ring (a few ms each; a bar per cell took 16 s a figure at 3240 cells), each
     cell cut into enough pieces in phi that its arcs stay round."""
@@ -59,7 +59,7 @@ def polar_maps(comparison, sensor, i: int, path: Path) -> None:
         (axes[2], rel, error_norm, plt.cm.RdBu_r, "(model - sim) / sim",
          f"scale clipped at +-{limit:.3g} (95th percentile of |error|, at least 0.05)"),
     ):
-        _polar_cells(ax, sensor, values, cmap, norm)
+        polar_cells(ax, sensor, values, cmap, norm)
         ax.set_title(title, fontsize=10, pad=14)
         bar = fig.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax, orientation="horizontal",
                            shrink=0.8, pad=0.1)
@@ -82,20 +82,7 @@ def incidence_plane(comparison, sensor, i: int, path: Path) -> None:
     theta_o is negative on the backscatter side (phi = phi_i) and positive on the specular side.
     """
     plt = _pyplot()
-    phi_i = comparison.phi_i[i]
-    theta = sensor.ring_centres()
-    rings = np.arange(sensor.n_rings)
-    xs, cells = [], []
-    for side, sign in ((phi_i, -1.0), (phi_i + np.pi, 1.0)):
-        w = direction(theta, side)
-        w[0] = [0.0, 0.0, 1.0]
-        cell = sensor.lookup(w)
-        keep = rings if sign < 0 else rings[1:]
-        xs.append(sign * np.degrees(theta[keep]))
-        cells.append(cell[keep])
-    x, cell = np.concatenate(xs), np.concatenate(cells)
-    order = np.argsort(x)
-    x, cell = x[order], cell[order]
+    x, cell = incidence_plane_cells(sensor, comparison.phi_i[i])
     fig, ax = plt.subplots(figsize=(7, 4.2))
     ax.errorbar(x, comparison.sim[i, cell], yerr=comparison.stderr[i, cell], fmt="o", ms=3, capsize=2,
                 label="simulation (cell average)")
@@ -108,6 +95,24 @@ def incidence_plane(comparison, sensor, i: int, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def incidence_plane_cells(sensor, phi_i: float):
+    """(signed theta_o in degrees, cell) of the cells on the plane of incidence at azimuth phi_i,
+    one per ring and side, sorted: theta_o < 0 on the backscatter side (phi = phi_i)."""
+    theta = sensor.ring_centres()
+    rings = np.arange(sensor.n_rings)
+    xs, cells = [], []
+    for side, sign in ((phi_i, -1.0), (phi_i + np.pi, 1.0)):
+        w = direction(theta, side)
+        w[0] = [0.0, 0.0, 1.0]
+        cell = sensor.lookup(w)
+        keep = rings if sign < 0 else rings[1:]
+        xs.append(sign * np.degrees(theta[keep]))
+        cells.append(cell[keep])
+    x, cell = np.concatenate(xs), np.concatenate(cells)
+    order = np.argsort(x)
+    return x[order], cell[order]
 
 
 def write_all(comparison, sensor, directory: Path) -> list[Path]:

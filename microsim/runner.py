@@ -167,7 +167,8 @@ class Result:
     plan: Plan
     sensor: Sensor
     brdf: list  # per incidence: Estimate of f_C over (RESULT_ROWS, n_cells): the orders, all orders
-    #             (row RESULT_ALL_ORDERS), order 1 scattered by the base (row RESULT_ORDER1_BASE)
+    #             (row RESULT_ALL_ORDERS), order 1 scattered by the base (row RESULT_ORDER1_BASE),
+    #             orders 1 and 2 (row RESULT_ORDERS12)
     albedo: list  # per incidence: Estimate over (RESULT_ROWS,), rows as brdf's
     energy: list  # per incidence: Estimate over (*ENERGY_NAMES, balance)
     counts: np.ndarray  # (n_incidences, len(COUNT_NAMES)) tracer event counts
@@ -208,7 +209,8 @@ class _Reducer:
         i = unit[1]
         res = self.result
         per_path = tally.exit_weight / tally.paths
-        cells = np.vstack([per_path[:ORDERS], per_path[:ORDERS].sum(axis=0), per_path[BASE_ROW]])
+        cells = np.vstack([per_path[:ORDERS], per_path[:ORDERS].sum(axis=0), per_path[BASE_ROW],
+                           per_path[0] + per_path[1]])
         res.brdf[i].add(cells / res.sensor.projected_solid_angle())
         albedo = cells.sum(axis=1)
         res.albedo[i].add(albedo)

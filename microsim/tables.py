@@ -11,6 +11,9 @@ Layout (required by CONVENTIONS 6, plus extras marked +):
     brdf, brdf_stderr                                  (n_i, n_c) 1/sr
     brdf_order (n_i, 4, n_c), + brdf_order_stderr      orders 1, 2, 3, 4+
     albedo, albedo_stderr (n_i,), + albedo_order, albedo_order_stderr (n_i, 4)
+    brdf_order1_base, albedo_order1_base (+ _stderr)   scenes with a base: order 1 from the base
+    + brdf_orders12, albedo_orders12 (+ _stderr)       orders 1 and 2 together (the paper's f2,
+                                                       interfaced_lambertian_microfacets.txt 3.3)
     energy/transmitted, energy/truncated, + energy/absorbed, + */..._stderr (n_i,)
     + energy/balance: albedo + transmitted + truncated + absorbed, 1 in expectation
     paths (n_i,)
@@ -42,7 +45,8 @@ import numpy as np
 
 from . import __version__
 from .frames import direction
-from .integrators.records import COUNT_NAMES, ENERGY_NAMES, ORDERS, RESULT_ALL_ORDERS, RESULT_ORDER1_BASE
+from .integrators.records import COUNT_NAMES, ENERGY_NAMES, ORDERS, RESULT_ALL_ORDERS, RESULT_ORDER1_BASE, \
+    RESULT_ORDERS12
 from .sensor import Sensor
 
 
@@ -121,7 +125,7 @@ def write(path: str | Path, result, config, overwrite: bool = False) -> Path:
             h5["sensor"].attrs["cells_requested"] = plan.sensor_cells
             has_base = plan.scene.get("base", "none") != "none"
             for name, estimates in (("brdf", result.brdf), ("albedo", result.albedo)):
-                rows = {"": RESULT_ALL_ORDERS, "_order": slice(0, ORDERS)}
+                rows = {"": RESULT_ALL_ORDERS, "_order": slice(0, ORDERS), "_orders12": RESULT_ORDERS12}
                 if has_base:
                     rows["_order1_base"] = RESULT_ORDER1_BASE
                 for suffix, row in rows.items():
@@ -230,10 +234,12 @@ AXES = {
        for name in ("theta_lo", "theta_hi", "phi_lo", "phi_hi", "solid_angle", "projected_solid_angle")},
     "sensor/direction": ("cells", "xyz"),
     **{name: ("incidences", "cells")
-       for name in ("brdf", "brdf_stderr", "brdf_order1_base", "brdf_order1_base_stderr")},
+       for name in ("brdf", "brdf_stderr", "brdf_order1_base", "brdf_order1_base_stderr", "brdf_orders12",
+                    "brdf_orders12_stderr")},
     **{name: ("incidences", "orders", "cells") for name in ("brdf_order", "brdf_order_stderr")},
     **{name: ("incidences",)
-       for name in ("albedo", "albedo_stderr", "albedo_order1_base", "albedo_order1_base_stderr", "paths")},
+       for name in ("albedo", "albedo_stderr", "albedo_order1_base", "albedo_order1_base_stderr", "albedo_orders12",
+                    "albedo_orders12_stderr", "paths")},
     **{name: ("incidences", "orders") for name in ("albedo_order", "albedo_order_stderr")},
     **{f"energy/{name}{suffix}": ("incidences",) for name in (*ENERGY_NAMES, "balance") for suffix in ("", "_stderr")},
     **{f"diagnostics/{name}": ("incidences",) for name in COUNT_NAMES},

@@ -1,11 +1,12 @@
-"""Bit identity: three small tables traced now equal, byte for byte, the golden ones checked in.
+"""Bit identity: four small tables traced now equal, byte for byte, the golden ones checked in.
 
 ``tests/data/golden_<name>.npz`` holds every dataset of the table that ``GOLDEN[name]`` gave
 when it was last regenerated, and the platform it was made on (machine and widest SIMD
 instruction set: Embree picks its kernels by it, so float32 hit distances may differ in the last
 bit elsewhere; on another platform the test skips and says so). The
 two tessellated configs run on the embreex backend, whose tables are those of c8660dd, the
-commit before issue 7; ``exact`` runs native spheres on the direct backend. Between them they
+commit before issue 7; ``exact`` runs native spheres on the direct backend; ``vcavities`` the
+analytic V-cavity tracer (issue 11). Between them they
 reach every tracer event: Lambertian, interfaced-Lambertian and conductor interactions, Russian
 roulette, pass-through of overlapping spheres, side wraps, a base plane, transmission through
 the slab and truncation by ``max_order``. Any change that moves a single
@@ -53,6 +54,13 @@ GOLDEN = {
         "illumination": {"theta_i_deg": [0.0, 70.0]},
         "sensor": {"cells": 20},
         "run": {"paths": 4000, "realizations": 2, "seed": 3, "backend": "direct"},
+    },
+    "vcavities": {
+        "scene": {"kind": "vcavities", "distribution": "ggx", "roughness_x": 0.4, "roughness_y": 0.8},
+        "material": {"kind": "interfaced_lambert", "albedo": 0.7, "eta": 1.5},
+        "illumination": {"theta_i_deg": [0.0, 80.0], "phi_i_deg": [0.0, 90.0]},
+        "sensor": {"cells": 20},
+        "run": {"paths": 4000, "realizations": 2, "seed": 3},
     },
 }
 

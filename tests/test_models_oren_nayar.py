@@ -12,8 +12,9 @@ from microsim.models.quadrature import directional_albedo
 SIGMAS = [0.0, 0.05, 0.3, 1.0, math.pi / 2 - 1e-6]
 
 
-def _reference(theta_i, phi_i, theta_o, phi_o, rho, sigma):
-    """Angle-form transcription of the published L1 + L2, as in KimuraRyo/libbsdf OrenNayar.h."""
+def _reference(theta_i, phi_i, theta_o, phi_o, rho, sigma, terms="full"):
+    """Angle-form transcription of the published L1 + L2 (L1 alone: ``terms="direct"``), as in
+    KimuraRyo/libbsdf OrenNayar.h."""
     cos_phi = np.cos(phi_o - phi_i)
     alpha, beta = np.maximum(theta_i, theta_o), np.minimum(theta_i, theta_o)
     s2 = sigma * sigma
@@ -22,7 +23,7 @@ def _reference(theta_i, phi_i, theta_o, phi_o, rho, sigma):
     c3 = 0.125 * s2 / (s2 + 0.09) * (4 * alpha * beta / np.pi**2) ** 2
     l1 = rho / np.pi * (c1 + cos_phi * c2 * np.tan(beta) + (1 - np.abs(cos_phi)) * c3 * np.tan((alpha + beta) / 2))
     l2 = 0.17 * rho**2 / np.pi * s2 / (s2 + 0.13) * (1 - cos_phi * (2 * beta / np.pi) ** 2)
-    return l1 + l2
+    return l1 + l2 if terms == "full" else l1
 
 
 def _angles(n, seed):
@@ -32,12 +33,14 @@ def _angles(n, seed):
     return theta, rng.uniform(0.0, 2.0 * np.pi, (2, n))
 
 
+@pytest.mark.parametrize("terms", ["full", "direct"])
 @pytest.mark.parametrize("sigma", SIGMAS)
-def test_matches_independent_transcription(sigma):
+def test_matches_independent_transcription(sigma, terms):
     theta, phi = _angles(400, 3)
-    m = models.create("oren_nayar", albedo=0.7, roughness=sigma)
+    m = models.create("oren_nayar", albedo=0.7, roughness=sigma, terms=terms)
     f = m(direction(theta[0], phi[0]), direction(theta[1], phi[1]))
-    np.testing.assert_allclose(f, np.maximum(_reference(theta[0], phi[0], theta[1], phi[1], 0.7, sigma), 0.0), rtol=1e-10)
+    expected = _reference(theta[0], phi[0], theta[1], phi[1], 0.7, sigma, terms)
+    np.testing.assert_allclose(f, np.maximum(expected, 0.0), rtol=1e-10)
 
 
 def test_negative_published_values_are_clamped():

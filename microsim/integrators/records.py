@@ -23,9 +23,11 @@ ORDERS = 4
 BASE_ROW = ORDERS
 TALLY_ROWS = ORDERS + 1
 #: rows of a run's per-incidence BRDF and albedo estimates (``runner.Result``) after the orders:
-#: all orders, then order 1 scattered by the base
-RESULT_ALL_ORDERS, RESULT_ORDER1_BASE = ORDERS, ORDERS + 1
-RESULT_ROWS = ORDERS + 2
+#: all orders, order 1 scattered by the base, and orders 1 and 2 together (the f2 of
+#: interfaced_lambertian_microfacets.txt Sec. 3.3, with a standard error of its own: the two
+#: orders of a realization are correlated)
+RESULT_ALL_ORDERS, RESULT_ORDER1_BASE, RESULT_ORDERS12 = ORDERS, ORDERS + 1, ORDERS + 2
+RESULT_ROWS = ORDERS + 3
 
 #: what a path carries from segment to segment: name -> dtype (one row per path)
 PATH_FIELDS = {

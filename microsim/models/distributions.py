@@ -23,7 +23,8 @@ V-cavity tracer, :mod:`microsim.integrators.vcavity`).
 
 GAFs: ``smith`` (separable G1(i) G1(o), Eq. 16-18), ``smith_height_correlated``
 (1 / (1 + Lambda(i) + Lambda(o)), the height-correlated Smith form of Heitz 2014) and
-``torrance_sparrow`` (V-cavities, Eq. 14). Smith's Lambda is exact for each distribution: closed forms for Beckmann (Eq. 19)
+``torrance_sparrow`` (V-cavities, Eq. 14; the exact single scattering of explicit V-grooves,
+:mod:`geometry.vcavities`). Smith's Lambda is exact for each distribution: closed forms for Beckmann (Eq. 19)
 and GGX (Eq. 21), a 1D Gauss-Legendre integral for ``gaussian`` (:func:`smith_lambda`).
 
 Accepted roughness: [ROUGHNESS_MIN, ROUGHNESS_MAX] = [1e-4, 10]. Below 1e-4 the lobe (width

@@ -17,6 +17,10 @@ Cross-checked against the independent implementation in KimuraRyo/libbsdf
 (include/libbsdf/ReflectanceModel/OrenNayar.h, the same L1 + L2), not the qualitative model of
 pbrt. f is L_r / (E0 cos theta_i), so the 1/cos theta_i of the radiance form cancels.
 
+``terms = "direct"`` keeps L1 alone: the model's single-bounce part, to judge against a table's
+order 1 (the full model against orders 1 + 2, and against all orders, as in
+``benchmarks/vcavities_fig7.py``).
+
 Reciprocal: every term depends on (theta_i, theta_o) only through max/min and on phi only through
 cos(phi), all symmetric under wi <-> wo (checked to 1e-10 relative in the tests).
 
@@ -50,6 +54,7 @@ class OrenNayar(BRDFModel):
     params = (
         Param("albedo", "facet albedo rho", None, 0.0, 1.0),
         Param("roughness", "sigma, standard deviation of the facet slope angle (radians)", None, 0.0, math.pi / 2, hi_open=True),
+        Param("terms", "full: L1 + L2; direct: L1 alone, the single-bounce part", "full", choices=("full", "direct")),
     )
     reference = "Oren & Nayar 1994 (SIGGRAPH), full model L1 + L2 (C1, C2, C3, inter-reflection)"
     #: Largest albedo for which the published form keeps the directional albedo <= 1 for every
@@ -71,5 +76,5 @@ class OrenNayar(BRDFModel):
         c2 = 0.45 * s2 / (s2 + 0.09) * np.where(cos_phi >= 0.0, np.sin(alpha), np.sin(alpha) - b**3)
         c3 = 0.125 * s2 / (s2 + 0.09) * (4.0 * alpha * beta / math.pi**2) ** 2
         direct = c1 + cos_phi * c2 * np.tan(beta) + (1.0 - np.abs(cos_phi)) * c3 * np.tan(0.5 * (alpha + beta))
-        inter = 0.17 * rho * s2 / (s2 + 0.13) * (1.0 - cos_phi * b**2)
+        inter = 0.17 * rho * s2 / (s2 + 0.13) * (1.0 - cos_phi * b**2) if self.terms == "full" else 0.0
         return np.maximum(rho / math.pi * (direct + inter), 0.0)
