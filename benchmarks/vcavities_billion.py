@@ -91,8 +91,8 @@ def side_by_side(paths: int, repeats: int) -> dict:
     analytic_replay(logger.ray_log[:, :3], logger.ray_log[:, 3:6])
     embreex = embree_scene(geometry.vcavities.CANONICAL_VERTICES, geometry.vcavities.CANONICAL_FACES)
     best, segments = {}, {}
-    for k in range(repeats):
-        key = stream_key(1, 0, k)
+    key = stream_key(1, 0, 0)  # every repeat traces the same paths: its segments are those of the best time
+    for _ in range(repeats):
         for name, t in tracers.items():
             start = time.perf_counter()
             tally = t.trace(wi, paths, key, 0)
@@ -160,7 +160,7 @@ def chart(speed: dict, run: dict, table_path: Path) -> Path:
                                   (a["brdf_orders12"][0], a["brdf_orders12_stderr"][0], "f2"),
                                   (table.brdf[0], table.brdf_stderr[0], "f_inf")):
         right.errorbar(x, values[cells], yerr=errors[cells], fmt="o-", ms=2.5, lw=1, capsize=1.5, label=label)
-    right.axvline(-THETA_I, color="grey", ls=":", lw=1)
+    right.axvline(-THETA_I, color="grey", ls=":", lw=1, label="retro direction")
     right.set_xlabel("theta_o (deg): backscatter side < 0 < specular side")
     right.set_ylabel("f (1/sr)")
     right.set_title(f"{run['paths']:.3g} paths, {run['wall_s']:.0f} s on {run['workers']} workers; "

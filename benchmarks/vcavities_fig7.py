@@ -78,7 +78,7 @@ def fig7(workers: int, reuse: bool) -> dict:
             x, cells = incidence_plane_cells(table.sensor, table.phi_i[i])
             for name, (values, errors) in curves.items():
                 ax.errorbar(x, values[i, cells], yerr=errors[i, cells], fmt="o-", ms=2, lw=1, capsize=1, label=name)
-            ax.axvline(-theta, color="grey", ls=":", lw=1)
+            ax.axvline(-theta, color="grey", ls=":", lw=1, label="retro")
             ax.set_title(f"{material}, theta_i = {theta:g} deg", fontsize=9)
             ax.set_xlabel("theta_o (deg), backscatter < 0", fontsize=8)
             ax.set_ylabel("f (1/sr)", fontsize=8)

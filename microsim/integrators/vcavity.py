@@ -19,8 +19,10 @@ Two ways to find that crossing (``intersector``), one path body:
 - :func:`meet_embree`: Embree's closest hit on the canonical groove (half-width 1, depth 1,
   :data:`geometry.vcavities.CANONICAL_FACES`), the ray mapped by (x, z) -> (x, z / h) and its
   axial motion dropped, so t is the world t; its origin is lifted 8 float32 spacings off the facet
-  it leaves (Embree works in float32). Rays can be logged, as on the fused backend, for the
-  benchmark's replay through Embree alone.
+  it leaves (Embree works in float32). Embree says which facet is met (or none); the distance to
+  it is then that of the float64 ray from the unlifted origin, so the lift does not move hit
+  points. Rays can be logged, as on the fused backend, for the benchmark's replay through Embree
+  alone.
 
 Paths run to completion one at a time, in chunks on threads exactly as on the fused surface
 backend (:func:`microsim.integrators.fused.trace_in_waves`): a table is bit-identical for any
@@ -179,34 +181,41 @@ def trace_path(work, row, number, beam, grooves, sensor, tally, meet, handle):
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def meet_analytic(handle, work, row, x, z, du, dz, h, last):
     """(facet or NONE, t) where the ray from (x, z) moving by (du, dz) leaves the groove's
-    cross-section: the smallest t at which it crosses a side going outwards (module doc)."""
+    cross-section: the smallest t at which it crosses a side going outwards (module doc). The
+    facet ``last`` that the ray leaves is not a candidate (the region is convex: a direction
+    scattered off a facet that rounds to grazing cannot meet it again)."""
     t, facet = math.inf, NONE
     if dz > 0.0:
         t = -z / dz
-    rate = dz + h * du  # d/dt of z + h (x + 1), >= 0 above the left facet
-    if rate < 0.0:
-        reach = max(z + h * (x + 1.0), 0.0) / -rate
+    if last != LEFT:
+        reach = facet_distance(z + h * (x + 1.0), dz + h * du)  # z + h (x + 1) >= 0 above the left facet
         if reach < t:
             t, facet = reach, LEFT
-    rate = dz - h * du  # d/dt of z + h (1 - x), >= 0 above the right facet
-    if rate < 0.0:
-        reach = max(z + h * (1.0 - x), 0.0) / -rate
+    if last != RIGHT:
+        reach = facet_distance(z + h * (1.0 - x), dz - h * du)  # z + h (1 - x) >= 0 above the right facet
         if reach < t:
             t, facet = reach, RIGHT
     return facet, t
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
+def facet_distance(height, rate):
+    """t at which a ray at ``height`` above a facet line (in the line's own measure), changing it
+    by ``rate`` per unit t, reaches the line; inf if it moves away or along it."""
+    return max(height, 0.0) / -rate if rate < 0.0 else math.inf
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
 def meet_embree(handle, work, row, x, z, du, dz, h, last):
     """:func:`meet_analytic` by Embree on the canonical groove (module doc)."""
-    cz, cdz = z / h, dz / h
+    cx, cz, cdz = x, z / h, dz / h
     if last == LEFT:
-        x, cz = x + EMBREE_OFFSET * _SQRT_HALF, cz + EMBREE_OFFSET * _SQRT_HALF
+        cx, cz = cx + EMBREE_OFFSET * _SQRT_HALF, cz + EMBREE_OFFSET * _SQRT_HALF
     elif last == RIGHT:
-        x, cz = x - EMBREE_OFFSET * _SQRT_HALF, cz + EMBREE_OFFSET * _SQRT_HALF
+        cx, cz = cx - EMBREE_OFFSET * _SQRT_HALF, cz + EMBREE_OFFSET * _SQRT_HALF
     tfar = -cz / cdz if cdz > 0.0 else math.inf
     records = work.records
-    embree.set_ray(records[row], (x, 0.0, cz), (du, 0.0, cdz), tfar)
+    embree.set_ray(records[row], (cx, 0.0, cz), (du, 0.0, cdz), tfar)
     if len(work.log):
         k = work.logged[0]
         work.logged[0] = k + 1
@@ -219,4 +228,6 @@ def meet_embree(handle, work, row, x, z, du, dz, h, last):
     record = records[row]
     if record.geomID == embree.INVALID_ID:
         return NONE, 0.0
-    return (LEFT if record.primID < LEFT_FACET_TRIANGLES else RIGHT), np.float64(record.tfar)
+    if record.primID < LEFT_FACET_TRIANGLES:
+        return LEFT, facet_distance(z + h * (x + 1.0), dz + h * du)
+    return RIGHT, facet_distance(z + h * (1.0 - x), dz - h * du)

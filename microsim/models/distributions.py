@@ -307,17 +307,28 @@ def sample_slope(code, roughness_x, roughness_y, states, i):
     - Beckmann, GGX: the map of :func:`sample` written on slopes. With psi = 2 pi xi2 the slope
       is s (ax cos psi, ay sin psi), s^2 = -log(1 - xi1) (Beckmann: Gaussian slopes of variance
       a^2 / 2 per axis) or xi1 / (1 - xi1) (GGX).
-    - gaussian (Eq. 13; density C exp(-theta^2 / (2 sigma^2)) sin(theta) in theta, uniform in
-      azimuth, theta below ``gaussian_theta_max``): rejection from the Rayleigh density
-      theta / sigma^2 exp(-theta^2 / (2 sigma^2)) (inverted in closed form), accepting with
-      probability sin(theta) / theta <= 1.
+    - gaussian (Eq. 13; density C exp(-theta^2 / (2 sigma^2)) sin(theta) in theta on
+      [0, top = ``gaussian_theta_max``], uniform in azimuth), by rejection from whichever of two
+      proposals accepts more: the Rayleigh density theta / sigma^2 exp(-theta^2 / (2 sigma^2)),
+      accepted with probability sin(theta) / theta, or sin(theta) / (1 - cos(top)) (uniform in
+      cos theta), accepted with probability exp(-theta^2 / (2 sigma^2)). Both accept the
+      integral I of exp(-theta^2 / (2 sigma^2)) sin(theta) over [0, top], divided by sigma^2 and
+      by 1 - cos(top) respectively: Rayleigh while sigma^2 < 1 - cos(top), about sigma < 1
+      (acceptance 0.997 at sigma = 0.1, 0.74 at 0.8, 0.60 at 1; then 0.69 at 1.2, 0.994 at 10).
     """
     if code == GAUSSIAN:
-        top = min(0.5 * math.pi, GAUSSIAN_CUTOFF * roughness_x)
+        sigma = roughness_x
+        top = min(0.5 * math.pi, GAUSSIAN_CUTOFF * sigma)
+        rayleigh = sigma * sigma < 1.0 - math.cos(top)
         while True:
-            theta = roughness_x * math.sqrt(-2.0 * math.log1p(-uniform(states, i)))
-            if theta <= top and (theta == 0.0 or uniform(states, i) * theta <= math.sin(theta)):
-                break
+            if rayleigh:
+                theta = sigma * math.sqrt(-2.0 * math.log1p(-uniform(states, i)))
+                if theta <= top and (theta == 0.0 or uniform(states, i) * theta <= math.sin(theta)):
+                    break
+            else:
+                theta = math.acos(1.0 - uniform(states, i) * (1.0 - math.cos(top)))
+                if uniform(states, i) <= math.exp(-0.5 * (theta / sigma) ** 2):
+                    break
         psi = 2.0 * math.pi * uniform(states, i)
         slope = math.tan(theta)
         return slope * math.cos(psi), slope * math.sin(psi)
