@@ -31,10 +31,12 @@ from microsim.fresnel import fresnel_array
 from microsim.integrators.records import SEGMENTS
 from microsim.integrators.vcavity import VCavityTracer
 from microsim.models import distributions as nd
-from microsim.rng import path_state, stream_key
+from microsim.rng import path_state
 from microsim.sensor import Sensor
 from matching_cells import RECIPROCITY_CELLS, reciprocity_z, ring_incidences
+from refusals import assert_run_refused, small_config
 from stat_bounds import chi2_bound, chi2_lower_bound
+from thread_identity import assert_bit_identical_for_threads
 
 CONDUCTOR = {"kind": "conductor", "eta": 0.2, "k": 3.9}
 #: dielectric-reflection facets: an interface of index 1.5 over a black body reflects F(i.h) alone
@@ -420,13 +422,7 @@ def test_embree_and_analytic_intersectors_trace_the_same_grooves():
 def test_tallies_are_bit_identical_for_any_number_of_threads():
     cfg = vcavity_config({"kind": "lambert", "albedo": 0.8}, "ggx", (0.5, 0.5), theta=[30.0], paths=50_000,
                          realizations=2, max_order=0, cells=100)
-    resolved = geometry.SCENES["vcavities"].resolve(cfg)
-    scene = geometry.SCENES["vcavities"].generate(resolved, cfg, None)
-    sensor = Sensor.build(100)
-    tallies = [VCavityTracer(scene, sensor, threads=k).trace(np.array([0.5, 0.0, math.sqrt(0.75)]), 50_000,
-                                                             stream_key(1, 0, 0), 0) for k in (1, 2)]
-    for field in ("exit_weight", "energy", "counts"):
-        assert np.array_equal(getattr(tallies[0], field), getattr(tallies[1], field))
+    assert_bit_identical_for_threads(VCavityTracer, cfg, 50_000)
 
 
 def test_resolved_scene_records_what_was_used():
@@ -438,22 +434,7 @@ def test_resolved_scene_records_what_was_used():
 
 # ---------------------------------------------------------------- g: bad input
 
-GROOVES = """
-[scene]
-kind = "vcavities"
-distribution = "beckmann"
-roughness = 0.5
-[material]
-kind = "lambert"
-albedo = 0.8
-[illumination]
-theta_i_deg = [30.0]
-[sensor]
-cells = 100
-[run]
-paths = 1000
-realizations = 2
-"""
+GROOVES = small_config('kind = "vcavities"\ndistribution = "beckmann"\nroughness = 0.5')
 
 BAD_GROOVES = {
     "unknown distribution": (("beckmann", "phong"), "scene.distribution"),
@@ -472,15 +453,6 @@ BAD_GROOVES = {
 
 @pytest.mark.parametrize("case", sorted(BAD_GROOVES))
 def test_bad_grooves_give_one_line_naming_the_key_and_exit_2(case, tmp_path, capsys):
-    from microsim.cli import main
-
     (old, new), key = BAD_GROOVES[case]
-    path = tmp_path / "bad.toml"
     assert old in GROOVES
-    path.write_text(GROOVES.replace(old, new, 1))
-    out = tmp_path / "bad.h5"
-    assert main(["run", str(path), "--out", str(out)]) == 2
-    captured = capsys.readouterr()
-    lines = captured.err.strip().splitlines()
-    assert len(lines) == 1 and key in lines[0] and "Traceback" not in captured.err, captured.err
-    assert captured.out == "" and list(tmp_path.iterdir()) == [path]
+    assert_run_refused(GROOVES.replace(old, new, 1), key, tmp_path, capsys)

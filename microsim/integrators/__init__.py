@@ -15,7 +15,8 @@ import importlib
 #: integrator name (a generator's INTEGRATOR) -> "module:class" of its tracer, imported on use
 #: (reading a table or its records must not import a tracer)
 INTEGRATORS = {"surface": "microsim.integrators.surface:SurfaceTracer",
-               "vcavity": "microsim.integrators.vcavity:VCavityTracer"}
+               "vcavity": "microsim.integrators.vcavity:VCavityTracer",
+               "medium": "microsim.integrators.medium:MediumTracer"}
 
 
 def get(name: str):

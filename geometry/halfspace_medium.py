@@ -1,0 +1,84 @@
+"""The radiative-transfer half space (CONVENTIONS 5.5): the volumetric reference.
+
+The half space z < 0 holds independent point scatterers with unit mean free path (lengths are
+in mean free paths), single-scattering albedo c = ``[material] albedo`` (``kind = "lambert"``:
+the scatterer's albedo) and the phase function ``phase``:
+
+- ``lambert_sphere``: the phase function of a Lambertian sphere, lambert_sphere_brdf.txt Eq. 1,
+  what the analytic Lambert-sphere BRDF approximates (``microsim.models.phase``);
+- ``isotropic``: 1 / (4 pi), whose half space has Chandrasekhar's closed form (``rte_isotropic``).
+
+No triangles: the medium integrator (:mod:`microsim.integrators.medium`) samples exponential
+free flights and exact phase-function directions. Nothing random belongs to a realization (the
+medium is homogeneous): a realization is an independent batch of paths. Every resolved value
+is in the table's ``scene/`` attrs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal, NamedTuple
+
+import numpy as np
+from pydantic import Field
+
+from microsim.schema import Section
+
+KIND = "halfspace_medium"
+INTEGRATOR = "medium"
+PHASES = ("isotropic", "lambert_sphere")
+#: how each phase function is sampled (stored in scene/phase_sampling)
+PHASE_SAMPLING = {
+    "isotropic": "exact: mu = 1 - 2 xi",
+    "lambert_sphere": "exact: lambert_sphere_brdf.txt Eq. 5 (three uniforms)",
+}
+
+
+class Config(Section):
+    kind: Literal["halfspace_medium"]
+    phase: Literal["isotropic", "lambert_sphere"] = Field(
+        "lambert_sphere", description="phase function of the point scatterers")
+
+
+class Medium(NamedTuple):
+    """What the medium kernels read: the phase function (index of PHASES) and the albedo."""
+
+    phase: int
+    albedo: float
+
+
+@dataclass
+class HalfspaceMedium:
+    """One realization: the medium's law (nothing random is drawn before tracing)."""
+
+    medium: Medium
+    info: dict = field(default_factory=dict)
+
+
+def check(config) -> None:
+    if config.base is not None:
+        raise ValueError("base: not used by scene kind 'halfspace_medium' (the medium fills z < 0); remove [base]")
+    if config.material.kind != "lambert":
+        raise ValueError(f"material.kind = {config.material.kind!r}: scene kind 'halfspace_medium' takes 'lambert' "
+                         "(its albedo is the scatterers' single-scattering albedo)")
+
+
+def for_backend(config, backend: str):
+    """(config, note): the medium needs no Embree at all."""
+    return config, ""
+
+
+def resolve(config) -> dict:
+    phase = config.scene.phase
+    return {"kind": KIND, "phase": phase, "phase_sampling": PHASE_SAMPLING[phase], "mean_free_path": 1.0,
+            "albedo": config.material.albedo, "triangles": 0, "max_mesh_error": 0.0}
+
+
+def scene_bytes(resolved: dict) -> int:
+    """Two numbers."""
+    return 4096
+
+
+def generate(resolved: dict, config, rng: np.random.Generator) -> HalfspaceMedium:
+    """The medium of a realization: its law only."""
+    return HalfspaceMedium(Medium(PHASES.index(resolved["phase"]), float(resolved["albedo"])), dict(resolved))

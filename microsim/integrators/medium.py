@@ -1,0 +1,107 @@
+"""The medium tracer: paths through the radiative-transfer half space z < 0 (no triangles).
+
+A path enters at the surface along -wi and runs free flights of exponential length (unit mean
+free path, -ln(1 - xi)); a flight that would cross z = 0 leaves there and is binned on the
+sensor by order (:func:`~microsim.integrators.events.exit_top`); otherwise the path scatters:
+its weight is multiplied by the albedo c, and its new direction makes the cosine mu with the
+old one, mu drawn exactly from the phase function (:func:`scatter_direction`), the azimuth
+about the old direction uniform. Roulette, truncation, orders and tallies are those of every
+integrator (:mod:`.events`). Paths run to completion one at a time, in chunks on threads as
+on the fused surface backend (:func:`microsim.integrators.fused.trace_in_waves`), so a table is
+bit-identical for any number of threads.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from ..models.phase import sample_phase_exact
+from ..rng import path_state, uniform
+from ..sampling import from_local
+from .events import exit_top, survives_interaction, truncate
+from .fused import CHUNK_PATHS, SLOTS, chunk_tally, trace_in_waves, wave_rows, workspace
+from .records import ABSORBED, SEGMENTS, Beam
+
+#: codes of geometry.halfspace_medium.PHASES
+ISOTROPIC, LAMBERT_SPHERE = 0, 1
+
+
+class MediumTracer:
+    """Traces batches of paths through a half-space medium (:class:`geometry.halfspace_medium.HalfspaceMedium`)
+    on ``threads`` threads; ``backend`` is accepted and unused (no Embree)."""
+
+    def __init__(self, scene, sensor, backend: str = "direct", threads: int = 1):
+        self.scene, self.sensor, self.threads = scene, sensor, threads
+
+    def trace(self, wi, n_paths: int, key, max_order: int):
+        """Trace ``n_paths`` paths arriving along -``wi`` on the random stream ``key``; see
+        :meth:`microsim.integrators.surface.SurfaceTracer.trace`."""
+        beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order)
+        medium, sensor = self.scene.medium, self.sensor
+        work = workspace(wave_rows(n_paths, self.threads), sensor.n_cells)
+        return trace_in_waves(n_paths, sensor.n_cells, self.threads, work,
+                              lambda first, start, stop: trace_chunks(first, start, stop, beam, medium, sensor, work))
+
+    @classmethod
+    def compile(cls, sensor, backend: str = "direct", threads: int = 1) -> None:
+        """Compile (or load) the kernel before workers fork, tracing nothing."""
+        from geometry.halfspace_medium import Medium
+
+        work = workspace(1, sensor.n_cells)
+        trace_chunks(0, 0, 0, Beam(np.array([0.0, 0.0, 1.0]), np.uint64(0), 0, 0), Medium(0, 0.5), sensor, work)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def trace_chunks(first, start, stop, beam, medium, sensor, work):
+    """Chunks first+start .. first+stop-1 of the beam, chunk first+j into tally row j."""
+    for j in range(start, stop):
+        tally = chunk_tally(work, j)
+        chunk = first + j
+        for number in range(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths)):
+            trace_path(work.paths, SLOTS * j, number, beam, medium, sensor, tally)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def trace_path(paths, row, number, beam, medium, sensor, tally):
+    """Path ``number`` of the beam, in ``row``, from the surface until it leaves, is absorbed or
+    is truncated (module doc)."""
+    paths.rng[row] = path_state(beam.key, number)
+    paths.weight[row] = 1.0
+    paths.order[row] = 0
+    paths.idle[row] = 0
+    paths.from_base[row] = 0
+    z = 0.0
+    d = (-beam.wi[0], -beam.wi[1], -beam.wi[2])
+    while True:
+        flight = -math.log1p(-uniform(paths.rng, row))
+        tally.counts[SEGMENTS] += 1
+        if d[2] > 0.0 and z + flight * d[2] >= 0.0:
+            exit_top(paths, row, d, sensor, tally)
+            return
+        if beam.max_order > 0 and paths.order[row] >= beam.max_order:
+            truncate(paths, row, tally)
+            return
+        z += flight * d[2]
+        d = scatter_direction(medium.phase, paths.rng, row, d)
+        w = paths.weight[row]
+        tally.energy[ABSORBED] += w * (1.0 - medium.albedo)
+        paths.weight[row] = w * medium.albedo
+        paths.order[row] += 1
+        if not survives_interaction(paths, row, tally):
+            return
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def scatter_direction(phase, states, i, d):
+    """A new unit direction at the cosine mu from d drawn from the phase function (isotropic:
+    mu = 1 - 2 xi; Lambert sphere: Eq. 5 of lambert_sphere_brdf.txt, exact), azimuth uniform."""
+    if phase == LAMBERT_SPHERE:
+        mu = sample_phase_exact(uniform(states, i), uniform(states, i), uniform(states, i))
+    else:
+        mu = 1.0 - 2.0 * uniform(states, i)
+    sine = math.sqrt(max(0.0, 1.0 - mu * mu))
+    azimuth = 2.0 * math.pi * uniform(states, i)
+    return from_local(sine * math.cos(azimuth), sine * math.sin(azimuth), mu, d)
