@@ -149,41 +149,93 @@ def run(config_path, out, workers, threads, backend, paths, seed, force):
               help="write PNG figures (polar maps, plane of incidence) into this directory")
 def compare(table_path, model_name, params, order, as_json, plot_dir):
     """Average a model over the cells of TABLE.h5 and report how far it is from the simulation."""
-    import json
-
     from . import compare as compare_module
-    from . import models, tables
+    from . import models
 
+    values = _model_parameters(params)
+    try:
+        model = models.create(model_name, **values)
+    except ValueError as err:
+        raise BadInput(f"--model {model_name}: {err}" if "unknown model" not in str(err) else f"--model: {err}") from None
+    table = _load_table(table_path)
+    try:
+        result = compare_module.compare(table, model, order)
+    except ValueError as err:  # NaN or infinity in the model's values (the message names it)
+        raise BadInput(str(err)) from None
+    _report(result, table, f"{model!r} vs {table_path}", as_json, plot_dir, result.as_dict())
+
+
+@cli.command()
+@click.argument("table_path", metavar="TABLE.h5", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--model", "model_name", required=True, help="analytic model (see `microsim models`)")
+@click.option("--free", "free", multiple=True, metavar="KEY", help="parameter to fit, repeatable")
+@click.option("--param", "params", multiple=True, metavar="KEY=VALUE",
+              help="fixed model parameter, or the starting value of a free one; repeatable")
+@click.option("--order", type=click.Choice(list(ORDER_ROWS)), default="all", show_default=True,
+              help="fit one scattering order of the table (as for compare)")
+@click.option("--json", "as_json", is_flag=True, help="print one JSON object: compare's, with a key fit")
+@click.option("--plot", "plot_dir", type=click.Path(file_okay=False, path_type=Path),
+              help="write PNG figures of the best fit into this directory")
+def fit(table_path, model_name, free, params, order, as_json, plot_dir):
+    """Fit model parameters to TABLE.h5 (weighted least squares on cell averages); report them with
+    standard errors, chi-square per degree of freedom and compare's figures for the best fit."""
+    from . import fit as fit_module
+    from . import models
+
+    if model_name not in models.available():
+        raise BadInput(f"--model: unknown model {model_name!r}; available: {', '.join(models.available())}")
+    values = _model_parameters(params)
+    table = _load_table(table_path)
+    try:
+        result = fit_module.fit(table, model_name, list(free), values, order)
+    except ValueError as err:
+        message = " ".join(str(err).split())
+        raise BadInput(message if message.startswith(("--", "table")) else f"--model {model_name}: {message}") from None
+    fitted = ", ".join(f"{k} = {v:.6g} +- {e:.2g}" for k, (v, e) in result.free.items())
+    header = (f"fit of {model_name} to {table_path}: {fitted}; chi^2 / dof = {result.chi2_per_dof:.3g} "
+              f"({result.dof} dof, {result.evaluations} evaluations)\nbest fit")
+    _report(result.comparison, table, header, as_json, plot_dir, result.as_dict())
+
+
+def _model_parameters(params) -> dict:
+    """--param KEY=VALUE items as a dictionary (values as text; the model checks them)."""
     values = {}
     for item in params:
         key, sep, value = item.partition("=")
         if not sep or not key:
             raise BadInput(f"--param {item!r}: expected KEY=VALUE")
         values[key.strip()] = value.strip()
+    return values
+
+
+def _load_table(table_path):
+    """The table at ``table_path``, or BadInput in one line."""
+    from . import tables
+
     try:
-        model = models.create(model_name, **values)
-    except ValueError as err:
-        raise BadInput(f"--model {model_name}: {err}" if "unknown model" not in str(err) else f"--model: {err}") from None
-    try:
-        table = tables.load(table_path)
+        return tables.load(table_path)
     except FileNotFoundError:
         raise BadInput(f"TABLE.h5: {table_path} not found") from None
     except tables.TableError as err:
         raise BadInput(f"TABLE.h5: {table_path}: {err}") from None
     except OSError as err:
         raise BadInput(f"TABLE.h5: {table_path} is not a microsim table ({err})") from None
-    try:
-        result = compare_module.compare(table, model, order)
-    except ValueError as err:  # NaN or infinity in the model's values (the message names it)
-        raise BadInput(str(err)) from None
+
+
+def _report(result, table, title, as_json, plot_dir, json_object) -> None:
+    """compare's per-incidence and overall figures (or ``json_object``), and its figures."""
+    import json
+
+    from . import compare as compare_module
+
     if plot_dir is not None:
         from . import plots
 
         written = plots.write_all(result, table.sensor, plot_dir)
     if as_json:
-        click.echo(json.dumps(result.as_dict()))
+        click.echo(json.dumps(json_object))
     else:
-        click.echo(f"{model!r} vs {table_path} (order {order}; cells with signal: table > "
+        click.echo(f"{title} (order {result.order}; cells with signal: table > "
                    f"{compare_module.SIGNAL_TO_NOISE:g} standard errors)")
         click.echo(f"{'theta_i':>8} {'phi_i':>6} {'cells':>6} {'med|rel|':>9} {'rel rmse':>9} {'max|z|':>8} "
                    f"{'albedo model':>13} {'albedo sim':>16}")

@@ -89,12 +89,22 @@ class Comparison:
 
 def cell_averages(model, sensor, wi: np.ndarray, stderr: np.ndarray):
     """Model averaged over every cell, refined until stable within the cell's standard error
-    (cells without one: within their share of ALBEDO_TOLERANCE of the albedo)."""
+    (cells without one: within their share of ALBEDO_TOLERANCE of the albedo). Returns the
+    averages and the largest last change, in standard errors."""
+    averages, change, _ = refined_cell_averages(model, sensor, wi, stderr)
+    return averages, change
+
+
+def refined_cell_averages(model, sensor, wi: np.ndarray, stderr: np.ndarray, tolerance: float = QUADRATURE_TOLERANCE):
+    """:func:`cell_averages` refined to ``tolerance`` standard errors, and the rule each cell
+    settled on (an n of QUADRATURE_RULES: n x n nodes), which :class:`CellRule` can hold fixed
+    (``microsim fit``)."""
     projected = sensor.projected_solid_angle()
     pending = np.arange(sensor.n_cells)
     previous = None
     result = np.zeros(sensor.n_cells)
     change = np.zeros(sensor.n_cells)
+    level = np.full(sensor.n_cells, QUADRATURE_RULES[-1])
     for n in QUADRATURE_RULES:
         w, weight = sensor.cell_quadrature(n, n, pending)
         values = model(np.broadcast_to(wi, w.shape), w)
@@ -102,16 +112,37 @@ def cell_averages(model, sensor, wi: np.ndarray, stderr: np.ndarray):
         result[pending] = current
         if previous is None:
             share = ALBEDO_TOLERANCE * max(float(result @ projected), 1e-300) / sensor.n_cells / projected
-            floor = np.where(stderr > 0, stderr, share / QUADRATURE_TOLERANCE)
+            floor = np.where(stderr > 0, stderr, share / tolerance)
             previous = current
             continue
         change[pending] = np.abs(current - previous) / floor[pending]
-        still = change[pending] > QUADRATURE_TOLERANCE
+        still = change[pending] > tolerance
+        level[pending[~still]] = n
         previous = current[still]
         pending = pending[still]
         if pending.size == 0:
             break
-    return result, float(change.max(initial=0.0))
+    return result, float(change.max(initial=0.0)), level
+
+
+class CellRule:
+    """A fixed quadrature of every cell: cell c with the n x n rule ``level[c]`` (from
+    :func:`refined_cell_averages`), so that a model's cell averages at other parameters cost one
+    evaluation and move smoothly with them (what a least-squares fit needs)."""
+
+    def __init__(self, sensor, wi: np.ndarray, level: np.ndarray):
+        nodes, weights, cells = [], [], []
+        for n in np.unique(level):
+            chosen = np.flatnonzero(level == n)
+            w, weight = sensor.cell_quadrature(int(n), int(n), chosen)
+            nodes.append(w.reshape(-1, 3))
+            weights.append(weight.reshape(-1))
+            cells.append(np.repeat(chosen, w.shape[1]))
+        self.nodes, self.weights, self.cells = np.concatenate(nodes), np.concatenate(weights), np.concatenate(cells)
+        self.wi, self.n_cells = np.broadcast_to(wi, self.nodes.shape), sensor.n_cells
+
+    def averages(self, model) -> np.ndarray:
+        return np.bincount(self.cells, weights=model(self.wi, self.nodes) * self.weights, minlength=self.n_cells)
 
 
 def compare(table, model, order: str = "all") -> Comparison:

@@ -1,0 +1,107 @@
+"""``microsim fit`` (issue 12, item e): it recovers the parameters of tables made from a model and
+the albedo of a plane table, reports a poor fit honestly, and refuses bad input in one line."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from microsim import models, tables
+from microsim.cli import main
+from microsim.compare import refined_cell_averages
+from microsim.fit import fit
+
+#: relative standard error of the synthetic tables
+NOISE = 0.01
+
+
+@pytest.fixture(scope="module")
+def medium_table(tmp_path_factory):
+    """A real table (isotropic medium, albedo 0.9, 3 incidences, 400 cells): its sensor and
+    incidences carry the synthetic tables, and its values the poor fit."""
+    from microsim import config, runner
+
+    cfg = config.validate({"scene": {"kind": "halfspace_medium", "phase": "isotropic"},
+                           "material": {"kind": "lambert", "albedo": 0.9},
+                           "illumination": {"theta_i_deg": [0.0, 40.0, 70.0]}, "sensor": {"cells": 400},
+                           "run": {"paths": 200_000, "realizations": 16, "seed": 3}})
+    path = tmp_path_factory.mktemp("fit") / "medium.h5"
+    tables.write(path, runner.run(cfg), cfg)
+    return tables.load(path)
+
+
+def synthetic(table, model, rng):
+    """``table`` with its BRDF replaced by the model's cell averages times (1 + NOISE x a normal
+    number), and standard errors NOISE x the averages."""
+    exact = np.stack([refined_cell_averages(model, table.sensor, wi, np.zeros(table.sensor.n_cells), 1e-3)[0]
+                      for wi in table.wi])
+    stderr = NOISE * exact
+    return dataclasses.replace(table, brdf=exact + stderr * rng.standard_normal(exact.shape), brdf_stderr=stderr)
+
+
+@pytest.mark.parametrize("name,truth,start", [
+    ("oren_nayar", {"albedo": 0.7, "roughness": 0.4}, {"albedo": "0.5", "roughness": "0.1"}),
+    ("rte_isotropic", {"albedo": 0.95}, {"albedo": "0.5"}),
+])
+def test_recovers_the_parameters_of_a_table_made_from_a_model(medium_table, name, truth, start):
+    """Four tables made from the model with independent noise: the mean of the four fits within
+    two standard errors (of that mean) of the parameters that made them, each fit within three,
+    and chi^2 per degree of freedom near 1 (within 5 of its standard deviations, sqrt(2 / dof)).
+    Without noise the fit returns the parameters to 1e-9."""
+    model, rng = models.create(name, **truth), np.random.default_rng(7)
+    fits = [fit(synthetic(medium_table, model, rng), name, list(truth), start) for _ in range(4)]
+    for key, value in truth.items():
+        best = np.array([f.free[key][0] for f in fits])
+        error = np.array([f.free[key][1] for f in fits])
+        assert np.all((error > 0) & (error < 0.05)) and np.all(np.abs(best - value) <= 3 * error), (key, best, error)
+        assert abs(best.mean() - value) <= 2 * error.mean() / 2, (key, best, error)
+    assert all(abs(f.chi2_per_dof - 1.0) <= 5 * np.sqrt(2 / f.dof) for f in fits)
+    noisy = synthetic(medium_table, model, rng)
+    exact = dataclasses.replace(noisy, brdf=noisy.brdf_stderr / NOISE)
+    for key, (best, _) in fit(exact, name, list(truth), start).free.items():
+        assert abs(best - truth[key]) <= 1e-9
+
+
+def test_recovers_the_albedo_of_a_plane_table(simulate):
+    table = simulate({"scene": {"kind": "plane"}, "material": {"kind": "lambert", "albedo": 0.6},
+                      "illumination": {"theta_i_deg": [0.0, 50.0]}, "sensor": {"cells": 100},
+                      "run": {"paths": 400_000, "realizations": 16, "seed": 5}})
+    result = fit(table, "lambert", ["albedo"], {})
+    best, error = result.free["albedo"]
+    assert abs(best - 0.6) <= 2 * error and error < 2e-3
+
+
+def test_reports_a_poor_fit_honestly(medium_table, capsys):
+    """A Lambertian surface cannot describe the medium (its BRDF rises to grazing): chi^2 per
+    degree of freedom far above 1 (9.4 measured on 200 000 paths), printed, and in the JSON
+    with the best value and its error."""
+    assert main(["fit", str(medium_table.path), "--model", "lambert", "--free", "albedo", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert out["fit_chi2_per_dof"] > 5 and set(out["fit"]["albedo"]) == {"value", "stderr"}
+    assert {"model", "per_incidence", "overall"} <= out.keys()
+    assert main(["fit", str(medium_table.path), "--model", "lambert", "--free", "albedo"]) == 0
+    assert "chi^2 / dof = " in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("args,key", [
+    (["--model", "lambert"], "--free"),
+    (["--model", "lambert", "--free", "roughness"], "--free roughness"),
+    (["--model", "lambert_sphere", "--free", "method"], "--free method"),
+    (["--model", "lambert", "--free", "albedo", "--free", "albedo"], "--free"),
+    (["--model", "velvet", "--free", "albedo"], "--model"),
+    (["--model", "oren_nayar", "--free", "albedo", "--param", "roughness=3"], "roughness"),
+    (["--model", "lambert", "--free", "albedo", "--order", "1-base"], "--order 1-base"),
+])
+def test_bad_input_gives_one_line_and_exit_2(medium_table, capsys, args, key):
+    assert main(["fit", str(medium_table.path), *args]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and key in lines[0] and "Traceback" not in captured.err, captured.err
+
+
+def test_a_missing_table_gives_one_line(tmp_path, capsys):
+    assert main(["fit", str(tmp_path / "none.h5"), "--model", "lambert", "--free", "albedo"]) == 2
+    assert "TABLE.h5" in capsys.readouterr().err
