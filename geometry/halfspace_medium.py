@@ -8,6 +8,7 @@ the scatterer's albedo) and the phase function ``phase``:
   what the analytic Lambert-sphere BRDF approximates (``microsim.models.phase``);
 - ``isotropic``: 1 / (4 pi), whose half space has Chandrasekhar's closed form (``rte_isotropic``).
 
+The albedo is in the table's config (a run of several albedos traces the largest, CONVENTIONS 4).
 No triangles: the medium integrator (:mod:`microsim.integrators.medium`) samples exponential
 free flights and exact phase-function directions. Nothing random belongs to a realization (the
 medium is homogeneous): a realization is an independent batch of paths. Every resolved value
@@ -71,7 +72,7 @@ def for_backend(config, backend: str):
 def resolve(config) -> dict:
     phase = config.scene.phase
     return {"kind": KIND, "phase": phase, "phase_sampling": PHASE_SAMPLING[phase], "mean_free_path": 1.0,
-            "albedo": config.material.albedo, "triangles": 0, "max_mesh_error": 0.0}
+            "triangles": 0, "max_mesh_error": 0.0}
 
 
 def scene_bytes(resolved: dict) -> int:
@@ -80,5 +81,5 @@ def scene_bytes(resolved: dict) -> int:
 
 
 def generate(resolved: dict, config, rng: np.random.Generator) -> HalfspaceMedium:
-    """The medium of a realization: its law only."""
-    return HalfspaceMedium(Medium(PHASES.index(resolved["phase"]), float(resolved["albedo"])), dict(resolved))
+    """The medium of a realization: its law only (the scatterers' albedo: the largest of a list)."""
+    return HalfspaceMedium(Medium(PHASES.index(resolved["phase"]), max(config.material.albedos)), dict(resolved))

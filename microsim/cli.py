@@ -106,34 +106,43 @@ def run(config_path, out, workers, threads, backend, paths, seed, force):
     except config_module.ConfigError as err:
         raise BadInput(str(err)) from None
     out = out if out is not None else Path(f"{config_path.stem}.h5")
-    _check_writable(out, force)
     try:
         plan = runner.Plan.from_config(config, threads, workers)
     except runner.PlanError as err:
         raise BadInput(str(err)) from None
+    # a run of several albedos writes one table each, named from --out with the albedo appended
+    outs = [out.with_name(f"{out.stem}_albedo{c:g}{out.suffix}") for c in plan.albedos] or [out]
+    for path in outs:
+        _check_writable(path, force)
     total = plan.paths * plan.n_incidences
     with _stop_on_signals(), _progress(plan) as advance:
         try:
-            result = runner.run(config, workers=workers, threads=threads, progress=advance)
+            results = runner.run_albedos(config, workers=workers, threads=threads, progress=advance)
         except (embree.EmbreeUnavailable, runner.WorkerFailed) as err:  # in a worker, one line each
             raise click.ClickException(str(err)) from None
         except runner.PlanError as err:
             raise BadInput(str(err)) from None
         try:
-            tables.write(out, result, config, overwrite=force)
+            for path, result in zip(outs, results):
+                tables.write(path, result, config, overwrite=force)
         except tables.TableExists as err:
             raise BadInput(f"--out: {err}") from None
     azimuths = len(set(plan.phi_i.tolist())) > 1  # paired azimuths: name each incidence by both angles
-    albedo = ", ".join(
+    summaries = [", ".join(
         f"{math.degrees(t):g}{f'/{math.degrees(p):g}' if azimuths else ''}deg {a.mean[RESULT_ALL_ORDERS]:.4f}+-{a.stderr[RESULT_ALL_ORDERS]:.4f}"
-        for t, p, a in zip(plan.theta_i, plan.phi_i, result.albedo)
-    )
-    rate = total / result.wall_time
-    click.echo(f"albedo {albedo} | {result.wall_time:.1f} s, {rate:.3g} paths/s, {workers} worker(s) x "
-               f"{plan.threads} thread(s), backend {plan.backend}")
+        for t, p, a in zip(plan.theta_i, plan.phi_i, result.albedo)) for result in results]
+    rate = total / results[0].wall_time
+    timing = (f"{results[0].wall_time:.1f} s, {rate:.3g} paths/s, {workers} worker(s) x {plan.threads} thread(s), "
+              f"backend {plan.backend}")
+    if len(results) == 1:
+        click.echo(f"albedo {summaries[0]} | {timing}")
+    else:
+        for path, result, summary in zip(outs, results, summaries):
+            click.echo(f"material albedo {result.albedo_value:g}: albedo {summary} -> {path}")
+        click.echo(f"{len(results)} albedos from one run of {plan.paths:,} paths an incidence: {timing}")
     if plan.backend_note:
         click.echo(f"note: {plan.backend_note}")
-    click.echo(f"table written to {out}")
+    click.echo(f"table written to {out}" if len(outs) == 1 else f"{len(outs)} tables written")
 
 
 @cli.command()

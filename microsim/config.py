@@ -146,7 +146,10 @@ def describe_error(error: dict, data: dict) -> str:
     key = ".".join(keys) or "config"
     kind = error["type"]
     if kind == "value_error":  # a rule of a section's own validator: its message is the line
-        return str(error["ctx"]["error"])
+        message = str(error["ctx"]["error"])
+        if len(keys) > 1 and message.startswith(keys[-1] + " "):  # a field's rule: add its section
+            return ".".join(keys[:-1]) + "." + message
+        return message
     shown = f" = {value!r}" if value is not None and not isinstance(value, dict) else ""
     if kind == "extra_forbidden":
         return f"{key}: unknown key; allowed keys here: {', '.join(owner.model_fields)}"

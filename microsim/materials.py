@@ -26,6 +26,7 @@ from typing import ClassVar, Literal
 
 import numba
 import numpy as np
+import pydantic
 from pydantic import Field
 
 from .fresnel import fresnel_conductor, fresnel_dielectric
@@ -36,6 +37,8 @@ from .schema import Section
 #: kind name -> definition, in the order of definition
 MATERIALS: dict[str, type["Material"]] = {}
 
+#: most albedos of a Lambertian material traced together (CONVENTIONS 4)
+MAX_ALBEDOS = 16
 #: cap on the body bounces of one interfaced_lambert interaction; weight left is truncated
 MAX_BODY_BOUNCES = 256
 #: cosines at which a conductor's reflectance is probed for its largest value
@@ -95,14 +98,44 @@ ABSORBER = Absorber.code
 
 
 class Lambert(Material):
-    """Lambertian reflector: cosine sampling about the shading normal, weight x albedo."""
+    """Lambertian reflector: cosine sampling about the shading normal, weight x albedo.
+
+    ``albedo`` may be a list (CONVENTIONS 4, every albedo from one run): the material scatters
+    with the largest, and a run tallies each exit for every listed albedo
+    (:class:`microsim.integrators.records.Tally`)."""
 
     kind: Literal["lambert"]
-    albedo: float = Field(ge=0.0, le=1.0, description="Lambertian albedo")
+    albedo: float | list[float] = Field(description="Lambertian albedo in [0, 1], or a list of them: every "
+                                                    "albedo from one run")
     code: ClassVar[int] = 1
 
+    @pydantic.field_validator("albedo", mode="before")
+    @classmethod
+    def _one_or_several(cls, value):
+        """A number in [0, 1], or a list of 1 to MAX_ALBEDOS distinct ones, the largest above 0
+        (the message starts with the field's name; the config adds its section)."""
+        accepted = (f"accepted: a number in [0, 1], or a list of 1 to {MAX_ALBEDOS} distinct numbers in [0, 1] "
+                    "(the largest above 0)")
+        numbers = value if isinstance(value, list) else [value]
+        if not numbers or len(numbers) > MAX_ALBEDOS or any(
+                isinstance(v, bool) or not isinstance(v, (int, float)) for v in numbers):
+            raise ValueError(f"albedo = {value!r}: {accepted}")
+        if not all(0.0 <= v <= 1.0 for v in numbers):
+            raise ValueError(f"albedo = {value!r}: out of range; {accepted}")
+        if isinstance(value, list) and (len(set(numbers)) != len(numbers) or max(numbers) <= 0.0):
+            raise ValueError(f"albedo = {value!r}: {accepted}")
+        return [float(v) for v in value] if isinstance(value, list) else float(value)
+
+    @property
+    def albedos(self) -> tuple[float, ...]:
+        """Every albedo of the material, in the order given (one unless ``albedo`` is a list)."""
+        return tuple(self.albedo) if isinstance(self.albedo, list) else (self.albedo,)
+
+    def row(self) -> tuple[float, ...]:
+        return (max(self.albedos),)
+
     def albedo_bound(self) -> float:
-        return self.albedo
+        return max(self.albedos)
 
 
 LAMBERT = Lambert.code

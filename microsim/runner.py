@@ -40,7 +40,7 @@ from .frames import direction
 from . import embree, integrators
 from .integrators import fused, wavefront
 from .integrators.records import BASE_ROW, COUNT_NAMES, ENERGY_NAMES, ORDERS, RESULT_ALL_ORDERS, RESULT_ROWS, \
-    TALLY_ROWS
+    SINGLE_ALBEDO, TALLY_ROWS
 from .rng import geometry_rng, stream_key
 from .sensor import Sensor
 
@@ -59,6 +59,14 @@ class Plan:
     backend: str  # resolved run.backend: "direct" or "embreex"
     backend_note: str  # why "auto" fell back to embreex ("" otherwise)
     threads: int = 1
+    albedos: tuple = ()  # the material's albedos traced together (CONVENTIONS 4); () for one
+
+    @property
+    def albedo_scale(self) -> np.ndarray:
+        """c_j / c_max of every albedo traced together (records.Tally); [1] for a run of one."""
+        if not self.albedos:
+            return SINGLE_ALBEDO
+        return np.asarray(self.albedos, np.float64) / max(self.albedos)
 
     @classmethod
     def from_config(cls, config, threads: int = 1, workers: int = 1) -> "Plan":
@@ -77,7 +85,7 @@ class Plan:
         config, substitution = generator.for_backend(config, backend)
         notes += [substitution] if substitution else []
         return cls(config, generator.resolve(config), theta, phi, config.sensor.cells, run.realizations,
-                   math.ceil(run.paths / run.realizations), backend, "; ".join(notes), threads)
+                   math.ceil(run.paths / run.realizations), backend, "; ".join(notes), threads, albedos_of(config))
 
     @property
     def n_incidences(self) -> int:
@@ -113,6 +121,23 @@ class Plan:
 
 class PlanError(ValueError):
     """A config that cannot be traced on this machine: the message is one line."""
+
+
+def albedos_of(config) -> tuple:
+    """The albedos of a run of several (CONVENTIONS 4), () for a run of one; PlanError where a
+    list cannot be traced as one run: every interaction must be with the Lambertian material or
+    absorb everything (records.Tally)."""
+    base = config.base
+    if base is not None and len(getattr(base, "albedos", ())) > 1:
+        raise PlanError("base.albedo: a list of albedos is taken by [material] only")
+    albedos = getattr(config.material, "albedos", ())
+    if len(albedos) <= 1:
+        return ()
+    if base is not None and base.kind != "absorber":
+        raise PlanError(f"material.albedo = {list(albedos)}: several albedos from one run need every interaction "
+                        f"to be with the material or absorb everything; here [base] is {base.kind!r} "
+                        "(give it kind = \"absorber\", or run one albedo at a time)")
+    return albedos
 
 
 def resolve_backend(requested: str, check: bool = True) -> tuple[str, list[str]]:
@@ -166,6 +191,7 @@ class Result:
 
     plan: Plan
     sensor: Sensor
+    albedo_value: float | None  # the material albedo of these estimates, in a run of several (else None)
     brdf: list  # per incidence: Estimate of f_C over (RESULT_ROWS, n_cells): the orders, all orders
     #             (row RESULT_ALL_ORDERS), order 1 scattered by the base (row RESULT_ORDER1_BASE),
     #             orders 1 and 2 (row RESULT_ORDERS12)
@@ -181,25 +207,26 @@ class Result:
 
 
 class _Reducer:
-    """Sums unit tallies in unit order, buffering those that arrive early."""
+    """Sums unit tallies in unit order, buffering those that arrive early; one Result per albedo."""
 
     def __init__(self, plan: Plan, sensor: Sensor):
         n_i, n_c = plan.n_incidences, sensor.n_cells
         self.plan = plan
-        self.result = Result(
-            plan, sensor,
+        self.results = [Result(
+            plan, sensor, value,
             [Estimate.zeros((RESULT_ROWS, n_c)) for _ in range(n_i)],
             [Estimate.zeros(RESULT_ROWS) for _ in range(n_i)],
             [Estimate.zeros(len(ENERGY_NAMES) + 1) for _ in range(n_i)],
             np.zeros((n_i, len(COUNT_NAMES)), np.int64),
-        )
+        ) for value in (plan.albedos or (None,))]
         self.order = {unit: k for k, unit in enumerate(plan.units)}
         self.pending = {}
         self.next = 0
         self.units = plan.units
 
     def add(self, unit, tally, info) -> None:
-        self.result.scene_info.setdefault(unit[0], info)
+        for result in self.results:
+            result.scene_info.setdefault(unit[0], info)
         self.pending[self.order[unit]] = (unit, tally)
         while self.next in self.pending:
             self._reduce(*self.pending.pop(self.next))
@@ -207,16 +234,16 @@ class _Reducer:
 
     def _reduce(self, unit, tally) -> None:
         i = unit[1]
-        res = self.result
-        per_path = tally.exit_weight / tally.paths
-        cells = np.vstack([per_path[:ORDERS], per_path[:ORDERS].sum(axis=0), per_path[BASE_ROW],
-                           per_path[0] + per_path[1]])
-        res.brdf[i].add(cells / res.sensor.projected_solid_angle())
-        albedo = cells.sum(axis=1)
-        res.albedo[i].add(albedo)
-        lost = tally.energy / tally.paths
-        res.energy[i].add(np.append(lost, albedo[RESULT_ALL_ORDERS] + lost.sum()))
-        res.counts[i] += tally.counts
+        for j, res in enumerate(self.results):
+            per_path = tally.exit_weight[j] / tally.paths
+            cells = np.vstack([per_path[:ORDERS], per_path[:ORDERS].sum(axis=0), per_path[BASE_ROW],
+                               per_path[0] + per_path[1]])
+            res.brdf[i].add(cells / res.sensor.projected_solid_angle())
+            albedo = cells.sum(axis=1)
+            res.albedo[i].add(albedo)
+            lost = tally.energy[j] / tally.paths
+            res.energy[i].add(np.append(lost, albedo[RESULT_ALL_ORDERS] + lost.sum()))
+            res.counts[i] += tally.counts
 
     @property
     def done(self) -> bool:
@@ -236,7 +263,7 @@ def trace_units(plan: Plan, units, emit) -> None:
             tracer = plan.tracer_class(scene, sensor, **plan.tracer_options)
             current = r
         tally = tracer.trace(plan.incidence_direction(i), plan.paths_per_realization, stream_key(seed, r, i),
-                             max_order)
+                             max_order, plan.albedo_scale)
         emit((r, i), tally, scene.info)
 
 
@@ -258,7 +285,7 @@ def memory_estimate(plan: Plan, sensor: Sensor, workers: int) -> int:
     batch of path rows or the chunk tallies of a wave, and its unit's tally; the main process
     sums into per-incidence estimates and buffers the tallies of units that arrive early (up to
     all but one worker's share)."""
-    tally = TALLY_ROWS * sensor.n_cells * 8
+    tally = max(1, len(plan.albedos)) * TALLY_ROWS * sensor.n_cells * 8
     if plan.backend == "embreex":
         paths = min(plan.paths_per_realization, wavefront.BATCH_PATHS) * PATH_ROW_BYTES
     else:
@@ -266,7 +293,8 @@ def memory_estimate(plan: Plan, sensor: Sensor, workers: int) -> int:
     tracing = plan.generator.scene_bytes(plan.scene) + paths + 2 * tally
     units = len(plan.units)
     processes = len(split(plan.units, max(1, workers)))
-    reducing = 3 * plan.n_incidences * RESULT_ROWS * sensor.n_cells * 8 + units * tally * (processes - 1) // processes
+    reducing = (3 * max(1, len(plan.albedos)) * plan.n_incidences * RESULT_ROWS * sensor.n_cells * 8
+                 + units * tally * (processes - 1) // processes)
     workers_bytes = WORKER_BYTES * processes if processes > 1 else 0
     return PROCESS_BYTES + workers_bytes + tracing * processes + reducing
 
@@ -336,9 +364,18 @@ def split(units: list, parts: int) -> list[list]:
 
 
 def run(config, workers: int = 1, threads: int = 1, progress=None) -> Result:
-    """Trace a validated config on ``workers`` processes of ``threads`` threads each;
-    ``progress(unit, paths)`` is called as units complete. Raises PlanError (one line), and
-    WorkerFailed if a worker raises or dies."""
+    """Trace a validated config of one albedo on ``workers`` processes of ``threads`` threads
+    each; ``progress(unit, paths)`` is called as units complete. Raises PlanError (one line), and
+    WorkerFailed if a worker raises or dies. A config of several albedos: :func:`run_albedos`."""
+    albedos = albedos_of(config)
+    if albedos:
+        raise PlanError(f"material.albedo = {list(albedos)}: several albedos make several tables (runner.run_albedos)")
+    return run_albedos(config, workers, threads, progress)[0]
+
+
+def run_albedos(config, workers: int = 1, threads: int = 1, progress=None) -> list[Result]:
+    """:func:`run` for a config of one albedo or several (CONVENTIONS 4): one Result per albedo,
+    in the order of ``material.albedo``, from one set of paths traced at the largest."""
     plan = Plan.from_config(config, threads, workers)
     sensor = Sensor.build(plan.sensor_cells)
     check_memory(plan, sensor, workers)
@@ -356,8 +393,9 @@ def run(config, workers: int = 1, threads: int = 1, progress=None) -> Result:
     else:
         plan.tracer_class.compile(sensor, **plan.tracer_options)
         _trace_on_workers(plan, blocks, collect)
-    reducer.result.wall_time = time.perf_counter() - start
-    return reducer.result
+    for result in reducer.results:
+        result.wall_time = time.perf_counter() - start
+    return reducer.results
 
 
 def _trace_on_workers(plan: Plan, blocks, collect) -> None:

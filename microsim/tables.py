@@ -92,8 +92,11 @@ def write(path: str | Path, result, config, overwrite: bool = False) -> Path:
     """Write the table of a :class:`microsim.runner.Result` atomically; return the path.
 
     Without ``overwrite``, an existing file at ``path`` is never replaced, even one that appeared
-    while the run traced: raises :class:`TableExists` and leaves both files as they were."""
+    while the run traced: raises :class:`TableExists` and leaves both files as they were. The
+    table of one albedo of a run of several stores the config of that albedo."""
     path = Path(path)
+    if result.albedo_value is not None:
+        config = config.model_copy(update={"material": config.material.model_copy(update={"albedo": result.albedo_value})})
     handle, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(handle)
     tmp = Path(name)
@@ -114,6 +117,9 @@ def write(path: str | Path, result, config, overwrite: bool = False) -> Path:
             h5.attrs["max_order"] = config.run.max_order
             h5.attrs["backend"] = plan.backend
             h5.attrs["backend_fallback"] = plan.backend_note
+            if plan.albedos:  # one table of a run of several albedos (CONVENTIONS 4)
+                h5.attrs["albedos_traced_together"] = np.array(plan.albedos)
+                h5.attrs["albedo_traced"] = max(plan.albedos)
             _store(h5, "incidence/theta", plan.theta_i)
             _store(h5, "incidence/phi", plan.phi_i)
             for name, bounds in zip(("theta_lo", "theta_hi", "phi_lo", "phi_hi"), sensor.cell_bounds()):

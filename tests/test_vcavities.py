@@ -294,7 +294,7 @@ def test_orders_1_and_2_give_f2_with_their_own_error_and_compare_reads_them(simu
     plan = runner.Plan.from_config(config.validate(settings))
     per_unit = {0: [], 1: []}
     runner.trace_units(plan, plan.units, lambda unit, tally, info: per_unit[unit[1]].append(
-        (tally.exit_weight[0] + tally.exit_weight[1]) / tally.paths / table.projected_solid_angle))
+        (tally.exit_weight[0, 0] + tally.exit_weight[0, 1]) / tally.paths / table.projected_solid_angle))
     for i, estimates in per_unit.items():
         spread = np.std(estimates, axis=0, ddof=1) / math.sqrt(len(estimates))
         assert np.allclose(a["brdf_orders12_stderr"][i], spread, rtol=1e-6, atol=1e-9 * spread.max())
@@ -445,7 +445,8 @@ BAD_GROOVES = {
     "anisotropic gaussian": (('"beckmann"\nroughness = 0.5', '"gaussian"\nroughness_x = 0.2\nroughness_y = 0.4'),
                              "scene.roughness_x"),
     "a base under the facets": (("[illumination]", '[base]\nkind = "absorber"\n[illumination]'), "base"),
-    "an albedo list": (("albedo = 0.8", "albedo = [0.3, 0.8]"), "material.albedo"),
+    "an albedo list of interfaced facets": (('kind = "lambert"\nalbedo = 0.8', 'kind = "interfaced_lambert"\n'
+                                                                             'albedo = [0.3, 0.8]'), "material.albedo"),
     "an unknown facet material": (('kind = "lambert"', 'kind = "velvet"'), "material.kind"),
     "an unknown intersector": (("roughness = 0.5", 'roughness = 0.5\nintersector = "optix"'), "scene.intersector"),
 }

@@ -3,8 +3,9 @@
 
 An integrator is a class built from one realization of a scene, the sensor and the run's
 options, ``Tracer(scene, sensor, backend=..., threads=...)``, with
-``trace(wi, n_paths, key, max_order) -> records.Tally`` (the paths of one unit of work, on the
-random stream ``key``; the tally must not depend on ``threads``) and a classmethod
+``trace(wi, n_paths, key, max_order, albedo_scale) -> records.Tally`` (the paths of one unit of
+work, on the random stream ``key``, tallied for every albedo of ``albedo_scale``; the tally must
+not depend on ``threads``) and a classmethod
 ``compile(sensor, **options)`` that compiles its kernels before worker processes fork. The per-path records and the events
 every integrator shares (exit and binning, roulette, truncation) are in :mod:`.records` and
 :mod:`.events`.

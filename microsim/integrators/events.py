@@ -19,7 +19,7 @@ from numba import literal_unroll
 
 from ..rng import uniform
 from ..sensor import cell_index
-from .records import BASE_ROW, ORDERS, ROULETTE_KILLS, TRUNCATED
+from .records import ABSORBED, BASE_ROW, ORDERS, ROULETTE_KILLS, TRUNCATED
 
 #: Russian roulette: a path whose weight falls below this survives with probability weight / ROULETTE_WEIGHT
 ROULETTE_WEIGHT = 0.05
@@ -36,14 +36,54 @@ def exit_top(paths, i, d, sensor, tally):
     BASE_ROW too if its one interaction was with the base plane)."""
     cell = cell_index(d, sensor)
     order = paths.order[i]
-    tally.exit_weight[min(order, ORDERS) - 1, cell] += paths.weight[i]
+    add_exit(tally, min(order, ORDERS) - 1, cell, paths.weight[i], order)
     if order == 1 and paths.from_base[i]:
-        tally.exit_weight[BASE_ROW, cell] += paths.weight[i]
+        add_exit(tally, BASE_ROW, cell, paths.weight[i], order)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def add_exit(tally, row, cell, w, order):
+    """Weight w of a path after ``order`` interactions into exit row ``row`` and ``cell``, for
+    every albedo of the tally (scaled by (c_j / c_max)^order, :class:`~.records.Tally`)."""
+    scale = tally.albedo_scale
+    if len(scale) == 1:
+        tally.exit_weight[0, row, cell] += w
+    else:
+        for j in range(len(scale)):
+            tally.exit_weight[j, row, cell] += w * scale[j] ** order
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def add_lost(tally, kind, w, order):
+    """Weight w of a path after ``order`` interactions into the lost energy ``kind`` (an index of
+    ENERGY_NAMES), for every albedo of the tally."""
+    scale = tally.albedo_scale
+    if len(scale) == 1:
+        tally.energy[0, kind] += w
+    else:
+        for j in range(len(scale)):
+            tally.energy[j, kind] += w * scale[j] ** order
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def add_interaction(tally, w, order, factor, cut):
+    """What a path of weight w after ``order`` interactions loses in one more: absorbed
+    1 - factor - cut of it, truncated ``cut``; for albedo j the factor is factor c_j / c_max
+    (an interaction keeps c_max or nothing, see :class:`~.records.Tally`)."""
+    scale = tally.albedo_scale
+    if len(scale) == 1:
+        tally.energy[0, ABSORBED] += w * (1.0 - factor - cut)
+        tally.energy[0, TRUNCATED] += w * cut
+    else:
+        for j in range(len(scale)):
+            weight = w * scale[j] ** order
+            tally.energy[j, ABSORBED] += weight * (1.0 - factor * scale[j] - cut)
+            tally.energy[j, TRUNCATED] += weight * cut
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def truncate(paths, i, tally):
-    tally.energy[TRUNCATED] += paths.weight[i]
+    add_lost(tally, TRUNCATED, paths.weight[i], paths.order[i])
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

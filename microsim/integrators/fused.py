@@ -40,7 +40,7 @@ import numba
 import numpy as np
 
 from .. import embree
-from .records import SEGMENTS, TALLY_ROWS, Rays, Tally, allocate_paths, empty_tally
+from .records import COUNT_NAMES, ENERGY_NAMES, SEGMENTS, TALLY_ROWS, Rays, Tally, allocate_paths, empty_tally
 from .surface import follow, prepare_segment, start_path
 
 #: paths of one chunk: traced in order by one thread, into a tally of their own
@@ -58,14 +58,14 @@ Workspace = namedtuple("Workspace", ["paths", "rays", "records", "exit_weight", 
                                      "logged"])
 
 
-def workspace(rows: int, n_cells: int, log_rays: int = 0) -> Workspace:
-    """Tallies for ``rows`` chunks, and SLOTS path rows (paths, queries) for each."""
-    tally = empty_tally(0, n_cells)
+def workspace(rows: int, n_cells: int, log_rays: int = 0, albedos: int = 1) -> Workspace:
+    """Tallies for ``rows`` chunks (of ``albedos`` albedos each), and SLOTS path rows (paths,
+    queries) for each."""
     records = embree.ray_hits(SLOTS * rows)
     rays = Rays(*embree.ray_views(records), np.zeros(SLOTS * rows, np.int8))  # segments written into the queries
     return Workspace(allocate_paths(SLOTS * rows), rays, records,
-                     np.zeros((rows, TALLY_ROWS, n_cells)), np.zeros((rows, len(tally.energy))),
-                     np.zeros((rows, len(tally.counts)), np.int64), np.zeros((log_rays, 7), np.float32),
+                     np.zeros((rows, albedos, TALLY_ROWS, n_cells)), np.zeros((rows, albedos, len(ENERGY_NAMES))),
+                     np.zeros((rows, len(COUNT_NAMES)), np.int64), np.zeros((log_rays, 7), np.float32),
                      np.zeros(1, np.int64))
 
 
@@ -100,9 +100,9 @@ class FusedBackend:
         self.ray_log = np.zeros((0, 7), np.float32)
 
     def trace(self, beam, scene, sensor):
-        work = workspace(wave_rows(beam.n_paths, self.threads), sensor.n_cells, self.log_rays)
+        work = workspace(wave_rows(beam.n_paths, self.threads), sensor.n_cells, self.log_rays, len(beam.albedo_scale))
         handle = self.embree.arrays()
-        total = trace_in_waves(beam.n_paths, sensor.n_cells, self.threads, work,
+        total = trace_in_waves(beam, sensor.n_cells, self.threads, work,
                                lambda *share: trace_chunks(*share, beam, scene, handle, sensor, work))
         self.ray_log = work.log[:min(work.logged[0], len(work.log))]
         return total
@@ -113,14 +113,14 @@ def wave_rows(n_paths: int, threads: int) -> int:
     return min(WAVE_CHUNKS_PER_THREAD * threads, max(math.ceil(n_paths / CHUNK_PATHS), 1))
 
 
-def trace_in_waves(n_paths: int, n_cells: int, threads: int, work: Workspace, trace_share):
-    """The tally of ``n_paths`` paths cut into chunks of CHUNK_PATHS, traced in waves of
+def trace_in_waves(beam, n_cells: int, threads: int, work: Workspace, trace_share):
+    """The tally of the beam's paths cut into chunks of CHUNK_PATHS, traced in waves of
     :func:`wave_rows` chunks on ``threads`` threads: ``trace_share(first, start, stop)`` traces
     chunks first+start .. first+stop-1 into the tally rows start .. stop-1 of ``work``, releasing
     the GIL; each wave's rows are added in chunk order (:func:`add_chunks`)."""
-    n_chunks = math.ceil(n_paths / CHUNK_PATHS)
+    n_chunks = math.ceil(beam.n_paths / CHUNK_PATHS)
     wave_chunks = WAVE_CHUNKS_PER_THREAD * threads
-    total = empty_tally(n_paths, n_cells)
+    total = empty_tally(beam.n_paths, n_cells, beam.albedo_scale)
     with ThreadPoolExecutor(threads) as pool:
         for first in range(0, n_chunks, wave_chunks):
             count = min(wave_chunks, n_chunks - first)
@@ -138,13 +138,13 @@ def trace_chunks(first, start, stop, beam, scene, handle, sensor, work):
     for j in range(start, stop):
         chunk = first + j
         trace_chunk(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths), SLOTS * j, beam, scene, handle,
-                    sensor, work, chunk_tally(work, j))
+                    sensor, work, chunk_tally(work, j, beam))
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def chunk_tally(work, j):
+def chunk_tally(work, j, beam):
     """Tally row j of the workspace, zeroed: where chunk j of a wave adds its paths."""
-    tally = Tally(0, work.exit_weight[j], work.energy[j], work.counts[j])
+    tally = Tally(0, work.exit_weight[j], work.energy[j], work.counts[j], beam.albedo_scale)
     tally.exit_weight[:] = 0.0
     tally.energy[:] = 0.0
     tally.counts[:] = 0
@@ -200,11 +200,12 @@ def add_chunks(total, work, count):
     """Add the tallies of rows 0 .. count-1 to ``total``, in row (= chunk) order, whatever thread
     traced which chunk."""
     for j in range(count):
-        for order in range(work.exit_weight.shape[1]):
-            for cell in range(work.exit_weight.shape[2]):
-                total.exit_weight[order, cell] += work.exit_weight[j, order, cell]
-        for k in range(work.energy.shape[1]):
-            total.energy[k] += work.energy[j, k]
+        for a in range(work.exit_weight.shape[1]):
+            for order in range(work.exit_weight.shape[2]):
+                for cell in range(work.exit_weight.shape[3]):
+                    total.exit_weight[a, order, cell] += work.exit_weight[j, a, order, cell]
+            for k in range(work.energy.shape[2]):
+                total.energy[a, k] += work.energy[j, a, k]
         for k in range(work.counts.shape[1]):
             total.counts[k] += work.counts[j, k]
 

@@ -21,9 +21,9 @@ import numpy as np
 from ..models.phase import sample_phase_exact
 from ..rng import path_state, uniform
 from ..sampling import from_local
-from .events import exit_top, survives_interaction, truncate
+from .events import add_interaction, exit_top, survives_interaction, truncate
 from .fused import CHUNK_PATHS, SLOTS, chunk_tally, trace_in_waves, wave_rows, workspace
-from .records import ABSORBED, SEGMENTS, Beam
+from .records import SEGMENTS, SINGLE_ALBEDO, Beam
 
 #: codes of geometry.halfspace_medium.PHASES
 ISOTROPIC, LAMBERT_SPHERE = 0, 1
@@ -36,13 +36,13 @@ class MediumTracer:
     def __init__(self, scene, sensor, backend: str = "direct", threads: int = 1):
         self.scene, self.sensor, self.threads = scene, sensor, threads
 
-    def trace(self, wi, n_paths: int, key, max_order: int):
+    def trace(self, wi, n_paths: int, key, max_order: int, albedo_scale=SINGLE_ALBEDO):
         """Trace ``n_paths`` paths arriving along -``wi`` on the random stream ``key``; see
         :meth:`microsim.integrators.surface.SurfaceTracer.trace`."""
-        beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order)
+        beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order, np.asarray(albedo_scale, np.float64))
         medium, sensor = self.scene.medium, self.sensor
-        work = workspace(wave_rows(n_paths, self.threads), sensor.n_cells)
-        return trace_in_waves(n_paths, sensor.n_cells, self.threads, work,
+        work = workspace(wave_rows(n_paths, self.threads), sensor.n_cells, albedos=len(beam.albedo_scale))
+        return trace_in_waves(beam, sensor.n_cells, self.threads, work,
                               lambda first, start, stop: trace_chunks(first, start, stop, beam, medium, sensor, work))
 
     @classmethod
@@ -58,7 +58,7 @@ class MediumTracer:
 def trace_chunks(first, start, stop, beam, medium, sensor, work):
     """Chunks first+start .. first+stop-1 of the beam, chunk first+j into tally row j."""
     for j in range(start, stop):
-        tally = chunk_tally(work, j)
+        tally = chunk_tally(work, j, beam)
         chunk = first + j
         for number in range(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths)):
             trace_path(work.paths, SLOTS * j, number, beam, medium, sensor, tally)
@@ -87,7 +87,7 @@ def trace_path(paths, row, number, beam, medium, sensor, tally):
         z += flight * d[2]
         d = scatter_direction(medium.phase, paths.rng, row, d)
         w = paths.weight[row]
-        tally.energy[ABSORBED] += w * (1.0 - medium.albedo)
+        add_interaction(tally, w, paths.order[row], medium.albedo, 0.0)
         paths.weight[row] = w * medium.albedo
         paths.order[row] += 1
         if not survives_interaction(paths, row, tally):

@@ -43,14 +43,21 @@ Paths = namedtuple("Paths", PATH_FIELDS)
 #: (n, 3), the distance ``tfar`` to the end of the segment, and which boundary ends it (``end``)
 Rays = namedtuple("Rays", ["origin", "direction", "tfar", "end"])
 
-#: the paths of one unit of work: incidence direction wi (float64 (3,)), random stream key
-#: (uint64), number of paths, and max_order (0: unlimited)
-Beam = namedtuple("Beam", ["wi", "key", "n_paths", "max_order"])
+#: one albedo: every weight tallied as traced
+SINGLE_ALBEDO = np.ones(1)
 
-#: what a batch of paths produced, sums of weights not yet divided by ``paths``: exits per order
-#: and sensor cell, then order 1 from the base alone (TALLY_ROWS, n_cells), lost energy
-#: (ENERGY_NAMES) and event counts (COUNT_NAMES)
-Tally = namedtuple("Tally", ["paths", "exit_weight", "energy", "counts"])
+#: the paths of one unit of work: incidence direction wi (float64 (3,)), random stream key
+#: (uint64), number of paths, max_order (0: unlimited), and the albedo scales c_j / c_max of a
+#: run of several albedos (float64 (A,); SINGLE_ALBEDO otherwise; see :class:`Tally`)
+Beam = namedtuple("Beam", ["wi", "key", "n_paths", "max_order", "albedo_scale"], defaults=(SINGLE_ALBEDO,))
+
+#: what a batch of paths produced, sums of weights not yet divided by ``paths``, for each of the
+#: A albedos of the run: exits per order and sensor cell, then order 1 from the base alone
+#: (A, TALLY_ROWS, n_cells), lost energy (A, ENERGY_NAMES); and event counts (COUNT_NAMES).
+#: Paths are traced at the largest albedo c_max; a weight w after k interactions counts
+#: w (c_j / c_max)^k for albedo j (``albedo_scale``), which is exact where every interaction is
+#: with one Lambertian material of albedo c_max or absorbs everything (CONVENTIONS 4).
+Tally = namedtuple("Tally", ["paths", "exit_weight", "energy", "counts", "albedo_scale"], defaults=(SINGLE_ALBEDO,))
 
 #: indices of ``Tally.energy``
 TRANSMITTED, TRUNCATED, ABSORBED = 0, 1, 2
@@ -69,6 +76,7 @@ def allocate_rays(n: int) -> Rays:
                 np.empty(n, np.int8))
 
 
-def empty_tally(paths: int, n_cells: int) -> Tally:
-    return Tally(paths, np.zeros((TALLY_ROWS, n_cells)), np.zeros(len(ENERGY_NAMES)),
-                 np.zeros(len(COUNT_NAMES), np.int64))
+def empty_tally(paths: int, n_cells: int, albedo_scale=SINGLE_ALBEDO) -> Tally:
+    n = len(albedo_scale)
+    return Tally(paths, np.zeros((n, TALLY_ROWS, n_cells)), np.zeros((n, len(ENERGY_NAMES))),
+                 np.zeros(len(COUNT_NAMES), np.int64), np.asarray(albedo_scale, np.float64))

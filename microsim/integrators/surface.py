@@ -41,8 +41,8 @@ from ..materials import Absorber, scatter
 from ..rng import path_state, uniform
 from ..scene import Scene, SceneBuilder
 from ..shapes import surface_point
-from .events import MAX_IDLE_SEGMENTS, exit_top, survives_interaction, truncate
-from .records import ABSORBED, INSIDE_HITS, TRANSMITTED, TRUNCATED, Beam
+from .events import MAX_IDLE_SEGMENTS, add_interaction, add_lost, exit_top, survives_interaction, truncate
+from .records import INSIDE_HITS, SINGLE_ALBEDO, TRANSMITTED, Beam
 
 #: segment ends: the tile side (wrap), the top (leave), the bottom (transmitted)
 SIDE_X, SIDE_Y, TOP, BOTTOM = 0, 1, 2, 3
@@ -72,13 +72,15 @@ class SurfaceTracer:
         self.arrays = scene.arrays()
         self.backend = backend_module(backend).backend(scene, threads)
 
-    def trace(self, wi, n_paths: int, key, max_order: int):
+    def trace(self, wi, n_paths: int, key, max_order: int, albedo_scale=SINGLE_ALBEDO):
         """Trace ``n_paths`` paths arriving along -``wi``; return their :class:`~records.Tally`.
 
         ``key`` selects the random stream (see :mod:`microsim.rng`); ``max_order`` = 0 means
-        unlimited, k > 0 truncates a path at its (k+1)-th interaction.
+        unlimited, k > 0 truncates a path at its (k+1)-th interaction; ``albedo_scale`` holds
+        c_j / c_max for a run of several albedos (:class:`~records.Tally`).
         """
-        beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order)
+        beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order,
+                    np.asarray(albedo_scale, np.float64))
         return self.backend.trace(beam, self.arrays, self.sensor)
 
     @classmethod
@@ -150,7 +152,7 @@ def follow(paths, rays, i, hit, scene, sensor, max_order, tally):
             exit_top(paths, i, d, sensor, tally)
             keep = False
         elif end == BOTTOM:
-            tally.energy[TRANSMITTED] += paths.weight[i]
+            add_lost(tally, TRANSMITTED, paths.weight[i], paths.order[i])
             keep = False
         else:
             paths.idle[i] += 1
@@ -174,8 +176,7 @@ def interact(paths, i, h, d, s, scene, tally):
     w = paths.weight[i]
     if paths.order[i] == 0:
         paths.from_base[i] = m == scene.base_material
-    tally.energy[ABSORBED] += w * (1.0 - factor - cut)
-    tally.energy[TRUNCATED] += w * cut
+    add_interaction(tally, w, paths.order[i], factor, cut)
     paths.weight[i] = w * factor
     paths.order[i] += 1
     if not survives_interaction(paths, i, tally):

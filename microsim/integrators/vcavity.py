@@ -42,9 +42,9 @@ from .. import embree
 from ..materials import scatter
 from ..models.distributions import sample_slope
 from ..rng import path_state, uniform
-from .events import exit_top, survives_interaction, truncate
+from .events import add_interaction, exit_top, survives_interaction, truncate
 from .fused import CHUNK_PATHS, SLOTS, chunk_tally, trace_in_waves, wave_rows, workspace
-from .records import ABSORBED, SEGMENTS, TRUNCATED, Beam
+from .records import SEGMENTS, SINGLE_ALBEDO, Beam
 
 #: facets of a groove, as :func:`meet_analytic` and :func:`meet_embree` name them; NONE: no facet
 LEFT, RIGHT, NONE = 0, 1, -1
@@ -68,12 +68,12 @@ class VCavityTracer:
         self.embree = embree.Scene(CANONICAL_VERTICES, CANONICAL_FACES) if scene.intersector == "embree" else None
         self.ray_log = np.zeros((0, 7), np.float32)
 
-    def trace(self, wi, n_paths: int, key, max_order: int):
+    def trace(self, wi, n_paths: int, key, max_order: int, albedo_scale=SINGLE_ALBEDO):
         """Trace ``n_paths`` paths arriving along -``wi`` on the random stream ``key``; see
         :meth:`microsim.integrators.surface.SurfaceTracer.trace`."""
-        beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order)
+        beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order, np.asarray(albedo_scale, np.float64))
         grooves, sensor = self.scene.grooves, self.sensor
-        work = workspace(wave_rows(n_paths, self.threads), sensor.n_cells, self.log_rays)
+        work = workspace(wave_rows(n_paths, self.threads), sensor.n_cells, self.log_rays, len(beam.albedo_scale))
         if self.embree is None:
             def share(first, start, stop):
                 trace_chunks_analytic(first, start, stop, beam, grooves, sensor, work)
@@ -82,7 +82,7 @@ class VCavityTracer:
 
             def share(first, start, stop):
                 trace_chunks_embree(first, start, stop, beam, grooves, handle, sensor, work)
-        total = trace_in_waves(n_paths, sensor.n_cells, self.threads, work, share)
+        total = trace_in_waves(beam, sensor.n_cells, self.threads, work, share)
         self.ray_log = work.log[:min(work.logged[0], len(work.log))]
         return total
 
@@ -119,7 +119,7 @@ def trace_chunks_embree(first, start, stop, beam, grooves, handle, sensor, work)
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def trace_chunks(first, start, stop, beam, grooves, sensor, work, meet, handle):
     for j in range(start, stop):
-        tally = chunk_tally(work, j)
+        tally = chunk_tally(work, j, beam)
         chunk = first + j
         for number in range(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths)):
             trace_path(work, SLOTS * j, number, beam, grooves, sensor, tally, meet, handle)
@@ -169,8 +169,7 @@ def trace_path(work, row, number, beam, grooves, sensor, tally, meet, handle):
             n = (-sin_m * cu, -sin_m * su, cos_m)
         d, factor, cut = scatter(grooves.material_code, grooves.material_params, paths.rng, row, d, n)
         w = paths.weight[row]
-        tally.energy[ABSORBED] += w * (1.0 - factor - cut)
-        tally.energy[TRUNCATED] += w * cut
+        add_interaction(tally, w, paths.order[row], factor, cut)
         paths.weight[row] = w * factor
         paths.order[row] += 1
         if not survives_interaction(paths, row, tally):
