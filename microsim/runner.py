@@ -40,7 +40,7 @@ from .frames import direction
 from . import embree, integrators
 from .integrators import fused, wavefront
 from .integrators.records import BASE_ROW, COUNT_NAMES, ENERGY_NAMES, ORDERS, RESULT_ALL_ORDERS, RESULT_ROWS, \
-    SINGLE_ALBEDO, TALLY_ROWS
+    SINGLE_ALBEDO, TALLY_ROWS, per_albedo
 from .rng import geometry_rng, stream_key
 from .sensor import Sensor
 
@@ -234,14 +234,15 @@ class _Reducer:
 
     def _reduce(self, unit, tally) -> None:
         i = unit[1]
+        exit_weight, energy = per_albedo(tally.exit_weight, 2), per_albedo(tally.energy, 1)
         for j, res in enumerate(self.results):
-            per_path = tally.exit_weight[j] / tally.paths
+            per_path = exit_weight[j] / tally.paths
             cells = np.vstack([per_path[:ORDERS], per_path[:ORDERS].sum(axis=0), per_path[BASE_ROW],
                                per_path[0] + per_path[1]])
             res.brdf[i].add(cells / res.sensor.projected_solid_angle())
             albedo = cells.sum(axis=1)
             res.albedo[i].add(albedo)
-            lost = tally.energy[j] / tally.paths
+            lost = energy[j] / tally.paths
             res.energy[i].add(np.append(lost, albedo[RESULT_ALL_ORDERS] + lost.sum()))
             res.counts[i] += tally.counts
 

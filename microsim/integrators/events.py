@@ -45,24 +45,14 @@ def exit_top(paths, i, d, sensor, tally):
 def add_exit(tally, row, cell, w, order):
     """Weight w of a path after ``order`` interactions into exit row ``row`` and ``cell``, for
     every albedo of the tally (scaled by (c_j / c_max)^order, :class:`~.records.Tally`)."""
-    scale = tally.albedo_scale
-    if len(scale) == 1:
-        tally.exit_weight[0, row, cell] += w
-    else:
-        for j in range(len(scale)):
-            tally.exit_weight[j, row, cell] += w * scale[j] ** order
+    _add_exit(tally.exit_weight, tally.albedo_scale, row, cell, w, order)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def add_lost(tally, kind, w, order):
     """Weight w of a path after ``order`` interactions into the lost energy ``kind`` (an index of
     ENERGY_NAMES), for every albedo of the tally."""
-    scale = tally.albedo_scale
-    if len(scale) == 1:
-        tally.energy[0, kind] += w
-    else:
-        for j in range(len(scale)):
-            tally.energy[j, kind] += w * scale[j] ** order
+    _add_lost(tally.energy, tally.albedo_scale, kind, w, order)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
@@ -70,15 +60,43 @@ def add_interaction(tally, w, order, factor, cut):
     """What a path of weight w after ``order`` interactions loses in one more: absorbed
     1 - factor - cut of it, truncated ``cut``; for albedo j the factor is factor c_j / c_max
     (an interaction keeps c_max or nothing, see :class:`~.records.Tally`)."""
-    scale = tally.albedo_scale
-    if len(scale) == 1:
-        tally.energy[0, ABSORBED] += w * (1.0 - factor - cut)
-        tally.energy[0, TRUNCATED] += w * cut
+    _add_interaction(tally.energy, tally.albedo_scale, w, order, factor, cut)
+
+
+@numba.njit(cache=True, error_model="numpy", _nrt=False)
+def _add_exit(exit_weight, scale, row, cell, w, order):
+    """exit_weight[row, cell] += w; with an albedo axis, exit_weight[j, row, cell] += w scale[j]^order
+    for each albedo j. A tally of one albedo has no albedo axis: numba compiles each rank apart and
+    resolves the branch on ndim at compile time (for an argument, not for a tuple's field), so one
+    albedo runs the code it ran before albedo lists. Not inlined by numba; LLVM inlines it."""
+    if exit_weight.ndim == 2:
+        exit_weight[row, cell] += w
+    else:
+        for j in range(len(scale)):
+            exit_weight[j, row, cell] += w * scale[j] ** order
+
+
+@numba.njit(cache=True, error_model="numpy", _nrt=False)
+def _add_lost(energy, scale, kind, w, order):
+    """:func:`add_lost` on the energy array (the ranks as in :func:`_add_exit`)."""
+    if energy.ndim == 1:
+        energy[kind] += w
+    else:
+        for j in range(len(scale)):
+            energy[j, kind] += w * scale[j] ** order
+
+
+@numba.njit(cache=True, error_model="numpy", _nrt=False)
+def _add_interaction(energy, scale, w, order, factor, cut):
+    """:func:`add_interaction` on the energy array (the ranks as in :func:`_add_exit`)."""
+    if energy.ndim == 1:
+        energy[ABSORBED] += w * (1.0 - factor - cut)
+        energy[TRUNCATED] += w * cut
     else:
         for j in range(len(scale)):
             weight = w * scale[j] ** order
-            tally.energy[j, ABSORBED] += weight * (1.0 - factor * scale[j] - cut)
-            tally.energy[j, TRUNCATED] += weight * cut
+            energy[j, ABSORBED] += weight * (1.0 - factor * scale[j] - cut)
+            energy[j, TRUNCATED] += weight * cut
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

@@ -63,8 +63,9 @@ def workspace(rows: int, n_cells: int, log_rays: int = 0, albedos: int = 1) -> W
     queries) for each."""
     records = embree.ray_hits(SLOTS * rows)
     rays = Rays(*embree.ray_views(records), np.zeros(SLOTS * rows, np.int8))  # segments written into the queries
+    axis = (albedos,) if albedos > 1 else ()  # one albedo: no albedo axis (records.Tally)
     return Workspace(allocate_paths(SLOTS * rows), rays, records,
-                     np.zeros((rows, albedos, TALLY_ROWS, n_cells)), np.zeros((rows, albedos, len(ENERGY_NAMES))),
+                     np.zeros((rows, *axis, TALLY_ROWS, n_cells)), np.zeros((rows, *axis, len(ENERGY_NAMES))),
                      np.zeros((rows, len(COUNT_NAMES)), np.int64), np.zeros((log_rays, 7), np.float32),
                      np.zeros(1, np.int64))
 
@@ -200,14 +201,28 @@ def add_chunks(total, work, count):
     """Add the tallies of rows 0 .. count-1 to ``total``, in row (= chunk) order, whatever thread
     traced which chunk."""
     for j in range(count):
-        for a in range(work.exit_weight.shape[1]):
-            for order in range(work.exit_weight.shape[2]):
-                for cell in range(work.exit_weight.shape[3]):
-                    total.exit_weight[a, order, cell] += work.exit_weight[j, a, order, cell]
-            for k in range(work.energy.shape[2]):
-                total.energy[a, k] += work.energy[j, a, k]
+        _add_row(total.exit_weight, work.exit_weight, j)
+        _add_row(total.energy, work.energy, j)
         for k in range(work.counts.shape[1]):
             total.counts[k] += work.counts[j, k]
+
+
+@numba.njit(cache=True, error_model="numpy", _nrt=False)
+def _add_row(total, rows, j):
+    """total += rows[j], elementwise, for the ranks a tally takes (records.Tally: one albedo has
+    no albedo axis; the rank of an argument is known when numba compiles)."""
+    if total.ndim == 1:
+        for a in range(total.shape[0]):
+            total[a] += rows[j, a]
+    elif total.ndim == 2:
+        for a in range(total.shape[0]):
+            for b in range(total.shape[1]):
+                total[a, b] += rows[j, a, b]
+    else:
+        for a in range(total.shape[0]):
+            for b in range(total.shape[1]):
+                for c in range(total.shape[2]):
+                    total[a, b, c] += rows[j, a, b, c]
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
