@@ -147,6 +147,26 @@ class CellRule:
 
 def compare(table, model, order: str = "all") -> Comparison:
     """Average ``model`` over the cells of ``table`` (a :class:`microsim.tables.Table`) and compare."""
+    names, sim, stderr, albedo_sim, albedo_se = selection(table, order)
+    modelled = np.zeros_like(sim)
+    worst = 0.0
+    for i, wi in enumerate(table.wi):
+        modelled[i], change = cell_averages(model, table.sensor, wi, stderr[i])
+        worst = max(worst, change)
+    _require_finite(modelled, f"model {model!r}")
+    p = table.projected_solid_angle
+    return Comparison(model.name, dict(model.values), order, table.theta_i, table.phi_i, modelled, sim, stderr,
+                      with_signal(sim, stderr), modelled @ p, albedo_sim, albedo_se, worst)
+
+
+def with_signal(sim, stderr) -> np.ndarray:
+    """The cells where the table has signal: value above SIGNAL_TO_NOISE standard errors."""
+    return (stderr > 0) & (sim > SIGNAL_TO_NOISE * stderr)
+
+
+def selection(table, order: str):
+    """(dataset names, f_C, its standard error, albedo, its standard error) of the table's
+    ``order`` (a key of ORDER_ROWS), checked present and finite (ValueError, one line)."""
     if order not in ORDER_ROWS:
         raise ValueError(f"order {order!r}; accepted: {', '.join(ORDER_ROWS)}")
     row = ORDER_ROWS[order]
@@ -156,19 +176,10 @@ def compare(table, model, order: str = "all") -> Comparison:
     if row == ORDERS12 and not {"brdf_orders12", "albedo_orders12"} <= table.arrays.keys():
         raise ValueError(f"--order 1+2: table {table.path} has no brdf_orders12 and albedo_orders12 "
                          "(it was written before they existed)")
-    names, sim, stderr, albedo_sim, albedo_se = _selected(table, row)
-    for name, values in zip(names, (sim, stderr)):
+    selected = _selected(table, row)
+    for name, values in zip(selected[0], selected[1:3]):
         _require_finite(values, f"table {table.path}: {name} (order {order})")
-    modelled = np.zeros_like(sim)
-    worst = 0.0
-    for i, wi in enumerate(table.wi):
-        modelled[i], change = cell_averages(model, table.sensor, wi, stderr[i])
-        worst = max(worst, change)
-    _require_finite(modelled, f"model {model!r}")
-    signal = (stderr > 0) & (sim > SIGNAL_TO_NOISE * stderr)
-    p = table.projected_solid_angle
-    return Comparison(model.name, dict(model.values), order, table.theta_i, table.phi_i, modelled, sim, stderr,
-                      signal, modelled @ p, albedo_sim, albedo_se, worst)
+    return selected
 
 
 def _selected(table, row):

@@ -77,14 +77,14 @@ def fit(table, model_name: str, free: list[str], fixed: dict, order: str = "all"
         return models.create(model_name, **others, **dict(zip(free, (float(v) for v in x))))
 
     first = model_at(start)  # a bad fixed parameter fails here, in one line
-    base = compare.compare(table, first, order)  # checks the order and the table's values
-    signal = base.signal
+    _, sim, stderr, _, _ = compare.selection(table, order)  # checks the order and the table's values
+    signal = compare.with_signal(sim, stderr)
     if signal.sum() <= len(free):
         raise ValueError(f"table {table.path}: {int(signal.sum())} cells with signal, too few to fit "
                          f"{len(free)} parameters")
     tolerance = compare.QUADRATURE_TOLERANCE / math.sqrt(signal.sum())
     rules = [compare.CellRule(table.sensor, wi,
-                              compare.refined_cell_averages(first, table.sensor, wi, base.stderr[i], tolerance)[2])
+                              compare.refined_cell_averages(first, table.sensor, wi, stderr[i], tolerance)[2])
              for i, wi in enumerate(table.wi)]
 
     def residuals(x):
@@ -93,7 +93,7 @@ def fit(table, model_name: str, free: list[str], fixed: dict, order: str = "all"
         for i, rule in enumerate(rules):
             averages = rule.averages(model)
             ok = signal[i]
-            out.append((averages[ok] - base.sim[i, ok]) / base.stderr[i, ok])
+            out.append((averages[ok] - sim[i, ok]) / stderr[i, ok])
         return np.concatenate(out)
 
     solution = least_squares(residuals, start, bounds=bounds, method="trf", x_scale="jac")

@@ -3,6 +3,7 @@
 A path ``i`` is a row of a :class:`~microsim.integrators.records.Paths` bundle; the kernels
 update it and the batch's :class:`~microsim.integrators.records.Tally` in place:
 
+- :func:`begin_path`: a path's starting state;
 - :func:`exit_top`: the path leaves the surface; its weight is binned on the sensor, by order
   (and order 1 scattered by the base plane apart);
 - :func:`survives_interaction`: after an interaction, the path ends if it has no weight left,
@@ -17,7 +18,7 @@ from __future__ import annotations
 import numba
 from numba import literal_unroll
 
-from ..rng import uniform
+from ..rng import path_state, uniform
 from ..sensor import cell_index
 from .records import ABSORBED, BASE_ROW, ORDERS, ROULETTE_KILLS, TRUNCATED
 
@@ -28,6 +29,17 @@ MAX_INTERACTIONS = 100_000
 #: a path that goes this many segments without an interaction (tile-side crossings, pass-throughs)
 #: is truncated: only a ray parallel to the surface in empty space could get there
 MAX_IDLE_SEGMENTS = 20_000
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def begin_path(paths, i, number, key):
+    """Row i holds path ``number`` of the stream ``key`` from now on: its random state, weight 1,
+    no interaction yet (every field of records.PATH_FIELDS starts here)."""
+    paths.rng[i] = path_state(key, number)
+    paths.weight[i] = 1.0
+    paths.order[i] = 0
+    paths.idle[i] = 0
+    paths.from_base[i] = 0
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

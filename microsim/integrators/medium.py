@@ -19,9 +19,9 @@ import numba
 import numpy as np
 
 from ..models.phase import sample_phase_exact
-from ..rng import path_state, uniform
+from ..rng import uniform
 from ..sampling import from_local
-from .events import add_interaction, exit_top, survives_interaction, truncate
+from .events import add_interaction, begin_path, exit_top, survives_interaction, truncate
 from .fused import CHUNK_PATHS, SLOTS, chunk_tally, trace_in_waves, wave_rows, workspace
 from .records import SEGMENTS, SINGLE_ALBEDO, Beam
 
@@ -68,11 +68,7 @@ def trace_chunks(first, start, stop, beam, medium, sensor, work):
 def trace_path(paths, row, number, beam, medium, sensor, tally):
     """Path ``number`` of the beam, in ``row``, from the surface until it leaves, is absorbed or
     is truncated (module doc)."""
-    paths.rng[row] = path_state(beam.key, number)
-    paths.weight[row] = 1.0
-    paths.order[row] = 0
-    paths.idle[row] = 0
-    paths.from_base[row] = 0
+    begin_path(paths, row, number, beam.key)
     z = 0.0
     d = (-beam.wi[0], -beam.wi[1], -beam.wi[2])
     while True:

@@ -6,7 +6,7 @@ because the classes live in this importable module). Kernels take a few bundles 
 index instead of dozens of arrays. A new per-path field is one entry of ``PATH_FIELDS``: it is
 allocated with the others and, on the embreex backend, carried along when live paths are
 compacted (:func:`microsim.integrators.events.move_path`); no kernel signature changes. Its
-starting value is set where a path starts (``surface.start_path``), its updates where it
+starting value is set where a path starts (``events.begin_path``), its updates where it
 changes.
 """
 

@@ -38,10 +38,10 @@ import numba
 import numpy as np
 
 from ..materials import Absorber, scatter
-from ..rng import path_state, uniform
+from ..rng import uniform
 from ..scene import Scene, SceneBuilder
 from ..shapes import surface_point
-from .events import MAX_IDLE_SEGMENTS, add_interaction, add_lost, exit_top, survives_interaction, truncate
+from .events import MAX_IDLE_SEGMENTS, add_interaction, begin_path, add_lost, exit_top, survives_interaction, truncate
 from .records import INSIDE_HITS, SINGLE_ALBEDO, TRANSMITTED, Beam
 
 #: segment ends: the tile side (wrap), the top (leave), the bottom (transmitted)
@@ -110,13 +110,9 @@ def backend_module(name: str):
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def start_path(paths, rays, i, number, beam, scene):
     """Path ``number`` of the beam starts in row i: a uniform point of the tile at z_top, along -wi."""
-    paths.rng[i] = path_state(beam.key, number)
+    begin_path(paths, i, number, beam.key)
     x = uniform(paths.rng, i) * scene.tile
     y = uniform(paths.rng, i) * scene.tile
-    paths.weight[i] = 1.0
-    paths.order[i] = 0
-    paths.idle[i] = 0
-    paths.from_base[i] = 0
     prepare_segment(rays, i, (x, y, scene.z_top), (-beam.wi[0], -beam.wi[1], -beam.wi[2]), scene)
 
 

@@ -41,8 +41,8 @@ from geometry.vcavities import CANONICAL_FACES, CANONICAL_VERTICES, LEFT_FACET_T
 from .. import embree
 from ..materials import scatter
 from ..models.distributions import sample_slope
-from ..rng import path_state, uniform
-from .events import add_interaction, exit_top, survives_interaction, truncate
+from ..rng import uniform
+from .events import add_interaction, begin_path, exit_top, survives_interaction, truncate
 from .fused import CHUNK_PATHS, SLOTS, chunk_tally, trace_in_waves, wave_rows, workspace
 from .records import SEGMENTS, SINGLE_ALBEDO, Beam
 
@@ -130,11 +130,7 @@ def trace_path(work, row, number, beam, grooves, sensor, tally, meet, handle):
     """Path ``number`` of the beam, in ``row`` of the workspace, from its groove's aperture until
     it leaves, is absorbed or is truncated (module doc)."""
     paths = work.paths
-    paths.rng[row] = path_state(beam.key, number)
-    paths.weight[row] = 1.0
-    paths.order[row] = 0
-    paths.idle[row] = 0
-    paths.from_base[row] = 0
+    begin_path(paths, row, number, beam.key)
     sx, sy = sample_slope(grooves.distribution, grooves.roughness_x, grooves.roughness_y, paths.rng, row)
     slope = math.sqrt(sx * sx + sy * sy)
     cu, su = (sx / slope, sy / slope) if slope > 0.0 else (1.0, 0.0)
