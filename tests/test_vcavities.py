@@ -189,11 +189,14 @@ def test_diffuse_facets_single_scattering_is_the_eq_2_integral(material, eta, di
 @pytest.mark.parametrize("distribution", ["beckmann", "ggx", "gaussian"])
 def test_white_and_mirror_facets_return_every_unit_of_energy(material, distribution):
     """albedo + truncated = 1 to 1e-6 up to theta_i = 89 deg and roughness 1.5 (nothing is absorbed
-    and nothing goes through the facets); and the truncated part is no lost path: none at all at
-    roughness 0.2, below 1e-3 at 1.5. There paths are cut at MAX_INTERACTIONS bounces in the
-    deepest grooves: the gaussian D keeps a finite density at theta_m = 90 deg, so grooves of any
-    depth occur (2.5e-4 of the white Lambertian paths at sigma = 1.5 rad)."""
-    for roughness, most_truncated in ((0.2, 0.0), (1.5, 1e-3)):
+    and nothing goes through the facets); and nothing is truncated, so no path is lost, except for
+    white Lambertian facets of the gaussian D at sigma = 1.5 rad. That D keeps a finite density at
+    theta_m = 90 deg, so grooves of any depth occur, and the few paths deep in them are cut at
+    MAX_INTERACTIONS bounces: 10 of 40 000 at theta_i = 0 (2.5e-4), 1 at 60 deg, measured; a lost
+    path would count as truncated, so the bound there, 1e-3, still catches any loss of more than
+    about 40 paths."""
+    deep = material["kind"] == "lambert" and distribution == "gaussian"
+    for roughness, most_truncated in ((0.2, 0.0), (1.5, 1e-3 if deep else 0.0)):
         cfg = vcavity_config(material, distribution, (roughness, roughness), theta=[0.0, 60.0, 85.0, 89.0],
                              paths=40_000, realizations=4, max_order=0, cells=100)
         result = runner.run(cfg)
