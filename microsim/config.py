@@ -70,6 +70,9 @@ class Illumination(Section):
 
 class SensorSection(Section):
     cells: int = Field(3240, ge=1, le=1_000_000)
+    retro_rings: int = Field(0, ge=0, le=100_000, description="rings about the retro direction, tallied "
+                             "apart from the cells (0: none); see microsim.sensor")
+    retro_max_deg: float = Field(10.0, gt=0.0, le=90.0, description="phase angle the retro rings reach, deg")
 
 
 class Run(Section):

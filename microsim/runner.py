@@ -104,6 +104,11 @@ class Plan:
     def incidence_direction(self, i: int) -> np.ndarray:
         return direction(self.theta_i[i], self.phi_i[i])
 
+    def build_sensor(self) -> Sensor:
+        """The run's sensor: its cells, and its retro rings if the config asks for them."""
+        section = self.config.sensor
+        return Sensor.build(self.sensor_cells).with_retro_rings(section.retro_rings, section.retro_max_deg)
+
     @property
     def generator(self):
         """The scene generator module of the config's scene kind."""
@@ -200,6 +205,10 @@ class Result:
     counts: np.ndarray  # (n_incidences, len(COUNT_NAMES)) tracer event counts
     scene_info: dict = field(default_factory=dict)  # realization -> info of the generated scene
     wall_time: float = 0.0
+    #: per incidence, if the sensor has retro rings: Estimate of f over (RESULT_ROWS, rings), rows as
+    #: brdf's, and the rings' projected solid angles about that incidence (n_rings,)
+    retro: list = field(default_factory=list)
+    retro_projected_solid_angle: list = field(default_factory=list)
 
     @property
     def paths(self) -> np.ndarray:
@@ -219,6 +228,11 @@ class _Reducer:
             [Estimate.zeros(len(ENERGY_NAMES) + 1) for _ in range(n_i)],
             np.zeros((n_i, len(COUNT_NAMES)), np.int64),
         ) for value in (plan.albedos or (None,))]
+        if sensor.retro_rings:
+            projected = [sensor.retro_projected_solid_angle(plan.incidence_direction(i)) for i in range(n_i)]
+            for result in self.results:
+                result.retro = [Estimate.zeros((RESULT_ROWS, sensor.retro_rings)) for _ in range(n_i)]
+                result.retro_projected_solid_angle = projected
         self.order = {unit: k for k, unit in enumerate(plan.units)}
         self.pending = {}
         self.next = 0
@@ -237,9 +251,13 @@ class _Reducer:
         exit_weight, energy = per_albedo(tally.exit_weight, 2), per_albedo(tally.energy, 1)
         for j, res in enumerate(self.results):
             per_path = exit_weight[j] / tally.paths
-            cells = np.vstack([per_path[:ORDERS], per_path[:ORDERS].sum(axis=0), per_path[BASE_ROW],
-                               per_path[0] + per_path[1]])
+            bins = np.vstack([per_path[:ORDERS], per_path[:ORDERS].sum(axis=0), per_path[BASE_ROW],
+                              per_path[0] + per_path[1]])
+            cells, rings = bins[:, :res.sensor.n_cells], bins[:, res.sensor.n_cells:]
             res.brdf[i].add(cells / res.sensor.projected_solid_angle())
+            if res.retro:
+                projected = res.retro_projected_solid_angle[i]
+                res.retro[i].add(np.divide(rings, projected, out=np.zeros_like(rings), where=projected > 0))
             albedo = cells.sum(axis=1)
             res.albedo[i].add(albedo)
             lost = energy[j] / tally.paths
@@ -253,7 +271,7 @@ class _Reducer:
 
 def trace_units(plan: Plan, units, emit) -> None:
     """Trace ``units`` in order, calling ``emit(unit, tally, scene_info)`` after each."""
-    sensor = Sensor.build(plan.sensor_cells)
+    sensor = plan.build_sensor()
     generator = plan.generator
     seed, max_order = plan.config.run.seed, plan.config.run.max_order
     current, tracer = None, None
@@ -286,7 +304,7 @@ def memory_estimate(plan: Plan, sensor: Sensor, workers: int) -> int:
     batch of path rows or the chunk tallies of a wave, and its unit's tally; the main process
     sums into per-incidence estimates and buffers the tallies of units that arrive early (up to
     all but one worker's share)."""
-    tally = max(1, len(plan.albedos)) * TALLY_ROWS * sensor.n_cells * 8
+    tally = max(1, len(plan.albedos)) * TALLY_ROWS * sensor.tally_width * 8
     if plan.backend == "embreex":
         paths = min(plan.paths_per_realization, wavefront.BATCH_PATHS) * PATH_ROW_BYTES
     else:
@@ -294,7 +312,7 @@ def memory_estimate(plan: Plan, sensor: Sensor, workers: int) -> int:
     tracing = plan.generator.scene_bytes(plan.scene) + paths + 2 * tally
     units = len(plan.units)
     processes = len(split(plan.units, max(1, workers)))
-    reducing = (3 * max(1, len(plan.albedos)) * plan.n_incidences * RESULT_ROWS * sensor.n_cells * 8
+    reducing = (3 * max(1, len(plan.albedos)) * plan.n_incidences * RESULT_ROWS * sensor.tally_width * 8
                  + units * tally * (processes - 1) // processes)
     workers_bytes = WORKER_BYTES * processes if processes > 1 else 0
     return PROCESS_BYTES + workers_bytes + tracing * processes + reducing
@@ -378,7 +396,7 @@ def run_albedos(config, workers: int = 1, threads: int = 1, progress=None) -> li
     """:func:`run` for a config of one albedo or several (CONVENTIONS 4): one Result per albedo,
     in the order of ``material.albedo``, from one set of paths traced at the largest."""
     plan = Plan.from_config(config, threads, workers)
-    sensor = Sensor.build(plan.sensor_cells)
+    sensor = plan.build_sensor()
     check_memory(plan, sensor, workers)
     reducer = _Reducer(plan, sensor)
     start = time.perf_counter()

@@ -20,6 +20,9 @@ Layout (required by CONVENTIONS 6, plus extras marked +):
     scene/ attrs: resolved scene parameters, largest triangle count;
     + scene/<count> (R,): what each realization generated (spheres, images, triangles, ...)
     + diagnostics/segments, inside_hits, roulette_kills (n_i,)
+    + with [sensor] retro_rings: sensor/retro_gamma_lo, retro_gamma_hi (n_r,) phase-angle bounds of
+      the retro rings (radians), sensor/retro_projected_solid_angle (n_i, n_r) about each
+      incidence; brdf_retro (n_i, n_r) and brdf_retro_order (n_i, 4, n_r) (+ _stderr), 1/sr
 
 Every dataset carries a Fletcher-32 checksum and the file is written in the HDF5 1.10 format,
 whose metadata (headers, chunk indexes) carry checksums too, so damaged bytes fail on reading.
@@ -129,6 +132,13 @@ def write(path: str | Path, result, config, overwrite: bool = False) -> Path:
             _store(h5, "sensor/projected_solid_angle", sensor.projected_solid_angle())
             _store(h5, "sensor/ring_counts", sensor.ring_counts)
             h5["sensor"].attrs["cells_requested"] = plan.sensor_cells
+            if result.retro:
+                for name, bounds in zip(("retro_gamma_lo", "retro_gamma_hi"), sensor.retro_phase_bounds()):
+                    _store(h5, f"sensor/{name}", bounds)
+                _store(h5, "sensor/retro_projected_solid_angle", np.stack(result.retro_projected_solid_angle))
+                for suffix, row in (("", RESULT_ALL_ORDERS), ("_order", slice(0, ORDERS))):
+                    _store(h5, f"brdf_retro{suffix}", np.stack([e.mean[row] for e in result.retro]))
+                    _store(h5, f"brdf_retro{suffix}_stderr", np.stack([e.stderr[row] for e in result.retro]))
             has_base = plan.scene.get("base", "none") != "none"
             for name, estimates in (("brdf", result.brdf), ("albedo", result.albedo)):
                 rows = {"": RESULT_ALL_ORDERS, "_order": slice(0, ORDERS), "_orders12": RESULT_ORDERS12}
@@ -243,6 +253,10 @@ AXES = {
        for name in ("brdf", "brdf_stderr", "brdf_order1_base", "brdf_order1_base_stderr", "brdf_orders12",
                     "brdf_orders12_stderr")},
     **{name: ("incidences", "orders", "cells") for name in ("brdf_order", "brdf_order_stderr")},
+    **{f"sensor/{name}": ("retro_rings",) for name in ("retro_gamma_lo", "retro_gamma_hi")},
+    **{name: ("incidences", "retro_rings") for name in ("sensor/retro_projected_solid_angle", "brdf_retro",
+                                                        "brdf_retro_stderr")},
+    **{name: ("incidences", "orders", "retro_rings") for name in ("brdf_retro_order", "brdf_retro_order_stderr")},
     **{name: ("incidences",)
        for name in ("albedo", "albedo_stderr", "albedo_order1_base", "albedo_order1_base_stderr", "albedo_orders12",
                     "albedo_orders12_stderr", "paths")},
@@ -323,7 +337,8 @@ def _check(arrays: dict) -> None:
         raise TableError(f"sensor/ring_counts holds {counts.tolist()}, expected cell counts >= 1, one per ring")
     if theta.ndim != 1:
         raise TableError(f"incidence/theta has shape {theta.shape}, expected (incidences,)")
-    sizes = {"incidences": theta.size, "cells": int(counts.sum()), "orders": ORDERS, "xyz": 3}
+    rings = arrays["sensor/retro_gamma_lo"].size if "sensor/retro_gamma_lo" in arrays else 0
+    sizes = {"incidences": theta.size, "cells": int(counts.sum()), "orders": ORDERS, "xyz": 3, "retro_rings": rings}
     for name, axes in AXES.items():
         expected = tuple(sizes[axis] for axis in axes)
         if name in arrays and arrays[name].shape != expected:

@@ -19,7 +19,7 @@ import numba
 from numba import literal_unroll
 
 from ..rng import path_state, uniform
-from ..sensor import cell_index
+from ..sensor import cell_index, retro_ring
 from .records import ABSORBED, BASE_ROW, ORDERS, ROULETTE_KILLS, TRUNCATED
 
 #: Russian roulette: a path whose weight falls below this survives with probability weight / ROULETTE_WEIGHT
@@ -45,12 +45,21 @@ def begin_path(paths, i, number, key):
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def exit_top(paths, i, d, sensor, tally):
     """Path i leaves along d: its weight goes to d's sensor cell, in the row of its order (and in
-    BASE_ROW too if its one interaction was with the base plane)."""
-    cell = cell_index(d, sensor)
+    BASE_ROW too if its one interaction was with the base plane); and likewise to d's retro ring,
+    if the sensor has retro rings and d falls in one (tally bins after the cells)."""
     order = paths.order[i]
-    add_exit(tally, min(order, ORDERS) - 1, cell, paths.weight[i], order)
-    if order == 1 and paths.from_base[i]:
+    row, from_base = min(order, ORDERS) - 1, order == 1 and paths.from_base[i]
+    cell = cell_index(d, sensor)
+    add_exit(tally, row, cell, paths.weight[i], order)
+    if from_base:
         add_exit(tally, BASE_ROW, cell, paths.weight[i], order)
+    if sensor.retro[4] > 0.0:
+        ring = retro_ring(d, sensor)
+        if ring >= 0:
+            slot = len(sensor.ring_of) + ring
+            add_exit(tally, row, slot, paths.weight[i], order)
+            if from_base:
+                add_exit(tally, BASE_ROW, slot, paths.weight[i], order)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

@@ -58,14 +58,14 @@ Workspace = namedtuple("Workspace", ["paths", "rays", "records", "exit_weight", 
                                      "logged"])
 
 
-def workspace(rows: int, n_cells: int, log_rays: int = 0, albedos: int = 1) -> Workspace:
-    """Tallies for ``rows`` chunks (of ``albedos`` albedos each), and SLOTS path rows (paths,
-    queries) for each."""
+def workspace(rows: int, width: int, log_rays: int = 0, albedos: int = 1) -> Workspace:
+    """Tallies of ``width`` bins (sensor.tally_width) for ``rows`` chunks (of ``albedos`` albedos
+    each), and SLOTS path rows (paths, queries) for each."""
     records = embree.ray_hits(SLOTS * rows)
     rays = Rays(*embree.ray_views(records), np.zeros(SLOTS * rows, np.int8))  # segments written into the queries
     axis = (albedos,) if albedos > 1 else ()  # one albedo: no albedo axis (records.Tally)
     return Workspace(allocate_paths(SLOTS * rows), rays, records,
-                     np.zeros((rows, *axis, TALLY_ROWS, n_cells)), np.zeros((rows, *axis, len(ENERGY_NAMES))),
+                     np.zeros((rows, *axis, TALLY_ROWS, width)), np.zeros((rows, *axis, len(ENERGY_NAMES))),
                      np.zeros((rows, len(COUNT_NAMES)), np.int64), np.zeros((log_rays, 7), np.float32),
                      np.zeros(1, np.int64))
 
@@ -79,7 +79,7 @@ def compile_kernels(beam, scene, sensor) -> None:
     no device. The library is loaded first: the kernel's machine code links to rtcIntersect1 by
     name (without it, loading the code segfaults)."""
     embree.available()
-    work = workspace(1, sensor.n_cells)
+    work = workspace(1, sensor.tally_width)
     trace_chunks(0, 0, 0, beam, scene.arrays(), embree.SceneHandle(0, np.zeros(1, np.int64), np.ones(2)), sensor, work)
 
 
@@ -101,9 +101,9 @@ class FusedBackend:
         self.ray_log = np.zeros((0, 7), np.float32)
 
     def trace(self, beam, scene, sensor):
-        work = workspace(wave_rows(beam.n_paths, self.threads), sensor.n_cells, self.log_rays, len(beam.albedo_scale))
+        work = workspace(wave_rows(beam.n_paths, self.threads), sensor.tally_width, self.log_rays, len(beam.albedo_scale))
         handle = self.embree.arrays()
-        total = trace_in_waves(beam, sensor.n_cells, self.threads, work,
+        total = trace_in_waves(beam, sensor.tally_width, self.threads, work,
                                lambda *share: trace_chunks(*share, beam, scene, handle, sensor, work))
         self.ray_log = work.log[:min(work.logged[0], len(work.log))]
         return total
@@ -114,14 +114,14 @@ def wave_rows(n_paths: int, threads: int) -> int:
     return min(WAVE_CHUNKS_PER_THREAD * threads, max(math.ceil(n_paths / CHUNK_PATHS), 1))
 
 
-def trace_in_waves(beam, n_cells: int, threads: int, work: Workspace, trace_share):
+def trace_in_waves(beam, width: int, threads: int, work: Workspace, trace_share):
     """The tally of the beam's paths cut into chunks of CHUNK_PATHS, traced in waves of
     :func:`wave_rows` chunks on ``threads`` threads: ``trace_share(first, start, stop)`` traces
     chunks first+start .. first+stop-1 into the tally rows start .. stop-1 of ``work``, releasing
     the GIL; each wave's rows are added in chunk order (:func:`add_chunks`)."""
     n_chunks = math.ceil(beam.n_paths / CHUNK_PATHS)
     wave_chunks = WAVE_CHUNKS_PER_THREAD * threads
-    total = empty_tally(beam.n_paths, n_cells, beam.albedo_scale)
+    total = empty_tally(beam.n_paths, width, beam.albedo_scale)
     with ThreadPoolExecutor(threads) as pool:
         for first in range(0, n_chunks, wave_chunks):
             count = min(wave_chunks, n_chunks - first)

@@ -40,9 +40,9 @@ class MediumTracer:
         """Trace ``n_paths`` paths arriving along -``wi`` on the random stream ``key``; see
         :meth:`microsim.integrators.surface.SurfaceTracer.trace`."""
         beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order, np.asarray(albedo_scale, np.float64))
-        medium, sensor = self.scene.medium, self.sensor
-        work = workspace(wave_rows(n_paths, self.threads), sensor.n_cells, albedos=len(beam.albedo_scale))
-        return trace_in_waves(beam, sensor.n_cells, self.threads, work,
+        medium, sensor = self.scene.medium, self.sensor.toward(beam.wi)
+        work = workspace(wave_rows(n_paths, self.threads), sensor.tally_width, albedos=len(beam.albedo_scale))
+        return trace_in_waves(beam, sensor.tally_width, self.threads, work,
                               lambda first, start, stop: trace_chunks(first, start, stop, beam, medium, sensor, work))
 
     @classmethod
@@ -50,7 +50,7 @@ class MediumTracer:
         """Compile (or load) the kernel before workers fork, tracing nothing."""
         from geometry.halfspace_medium import Medium
 
-        work = workspace(1, sensor.n_cells)
+        work = workspace(1, sensor.tally_width)
         trace_chunks(0, 0, 0, Beam(np.array([0.0, 0.0, 1.0]), np.uint64(0), 0, 0), Medium(0, 0.5), sensor, work)
 
 

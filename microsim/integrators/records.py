@@ -53,8 +53,9 @@ Beam = namedtuple("Beam", ["wi", "key", "n_paths", "max_order", "albedo_scale"],
 
 #: what a batch of paths produced, sums of weights not yet divided by ``paths``, for each of the
 #: A albedos of the run: exits per order and sensor cell, then order 1 from the base alone
-#: (A, TALLY_ROWS, n_cells), lost energy (A, ENERGY_NAMES); and event counts (COUNT_NAMES). A
-#: tally of one albedo has no albedo axis ((TALLY_ROWS, n_cells) and (ENERGY_NAMES,)).
+#: (A, TALLY_ROWS, bins), the bins being the sensor's cells and then its retro rings
+#: (``Sensor.tally_width``); lost energy (A, ENERGY_NAMES); and event counts (COUNT_NAMES). A
+#: tally of one albedo has no albedo axis ((TALLY_ROWS, bins) and (ENERGY_NAMES,)).
 #: Paths are traced at the largest albedo c_max; a weight w after k interactions counts
 #: w (c_j / c_max)^k for albedo j (``albedo_scale``), which is exact where every interaction is
 #: with one Lambertian material of albedo c_max or absorbs everything (CONVENTIONS 4).
@@ -77,9 +78,9 @@ def allocate_rays(n: int) -> Rays:
                 np.empty(n, np.int8))
 
 
-def empty_tally(paths: int, n_cells: int, albedo_scale=SINGLE_ALBEDO) -> Tally:
+def empty_tally(paths: int, width: int, albedo_scale=SINGLE_ALBEDO) -> Tally:
     axis = (len(albedo_scale),) if len(albedo_scale) > 1 else ()
-    return Tally(paths, np.zeros((*axis, TALLY_ROWS, n_cells)), np.zeros((*axis, len(ENERGY_NAMES))),
+    return Tally(paths, np.zeros((*axis, TALLY_ROWS, width)), np.zeros((*axis, len(ENERGY_NAMES))),
                  np.zeros(len(COUNT_NAMES), np.int64), np.asarray(albedo_scale, np.float64))
 
 

@@ -81,7 +81,7 @@ class SurfaceTracer:
         """
         beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order,
                     np.asarray(albedo_scale, np.float64))
-        return self.backend.trace(beam, self.arrays, self.sensor)
+        return self.backend.trace(beam, self.arrays, self.sensor.toward(beam.wi))
 
     @classmethod
     def compile(cls, sensor, backend: str = "direct", threads: int = 1) -> None:

@@ -72,8 +72,8 @@ class VCavityTracer:
         """Trace ``n_paths`` paths arriving along -``wi`` on the random stream ``key``; see
         :meth:`microsim.integrators.surface.SurfaceTracer.trace`."""
         beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order, np.asarray(albedo_scale, np.float64))
-        grooves, sensor = self.scene.grooves, self.sensor
-        work = workspace(wave_rows(n_paths, self.threads), sensor.n_cells, self.log_rays, len(beam.albedo_scale))
+        grooves, sensor = self.scene.grooves, self.sensor.toward(beam.wi)
+        work = workspace(wave_rows(n_paths, self.threads), sensor.tally_width, self.log_rays, len(beam.albedo_scale))
         if self.embree is None:
             def share(first, start, stop):
                 trace_chunks_analytic(first, start, stop, beam, grooves, sensor, work)
@@ -82,7 +82,7 @@ class VCavityTracer:
 
             def share(first, start, stop):
                 trace_chunks_embree(first, start, stop, beam, grooves, handle, sensor, work)
-        total = trace_in_waves(beam, sensor.n_cells, self.threads, work, share)
+        total = trace_in_waves(beam, sensor.tally_width, self.threads, work, share)
         self.ray_log = work.log[:min(work.logged[0], len(work.log))]
         return total
 
@@ -94,7 +94,7 @@ class VCavityTracer:
 
         beam = Beam(np.array([0.0, 0.0, 1.0]), np.uint64(0), 0, 0)
         grooves = Grooves(0, 0.5, 0.5, 0, np.zeros(2))
-        work = workspace(1, sensor.n_cells)
+        work = workspace(1, sensor.tally_width)
         trace_chunks_analytic(0, 0, 0, beam, grooves, sensor, work)
         try:
             embree.available()

@@ -55,7 +55,7 @@ class WavefrontBackend:
         rows = min(beam.n_paths, BATCH_PATHS)
         if len(self.paths.weight) < rows:
             self.paths, self.rays = allocate_paths(rows), allocate_rays(rows)
-        tally = empty_tally(beam.n_paths, sensor.n_cells, beam.albedo_scale)
+        tally = empty_tally(beam.n_paths, sensor.tally_width, beam.albedo_scale)
         for first in range(0, beam.n_paths, BATCH_PATHS):
             self._trace_batch(first, min(BATCH_PATHS, beam.n_paths - first), beam, scene, sensor, tally)
         return tally
