@@ -8,6 +8,7 @@ from scipy.spatial import cKDTree
 
 import geometry
 from microsim import config, embree, materials
+from microsim.boolean_model import free_path
 from microsim.rng import geometry_rng
 
 SPHERES = geometry.SCENES["poisson_spheres"]
@@ -114,3 +115,16 @@ def test_defaults_follow_the_free_path_and_are_recorded():
     white = SPHERES.resolve(scene_config(volume_fraction=0.3).model_copy(
         update={"material": materials.Lambert(kind="lambert", albedo=1.0)}))
     assert white["optical_depth"] == SPHERES.MAX_OPTICAL_DEPTH
+
+
+@pytest.mark.parametrize("phi, theta_max", [(0.3, 0.0), (0.6, 85.0), (0.45, 88.0), (0.1, 30.0)])
+def test_default_tile_brings_a_grazing_ray_back_a_diameter_from_its_own_track(phi, theta_max):
+    """A ray at the grazing angle (85 deg, or the run's largest incidence) that crosses a whole
+    tile passes its own track again at least 2 r away, where the cap allows (module doc)."""
+    cfg = scene_config(volume_fraction=phi).model_copy(update={"illumination": config.validate({
+        "scene": {"kind": "plane"}, "material": {"kind": "lambert", "albedo": 0.5},
+        "illumination": {"theta_i_deg": [0.0, theta_max]}, "run": {"paths": 10}}).illumination})
+    tile = SPHERES.resolve(cfg)["tile"]
+    separation = tile * math.cos(math.radians(max(theta_max, SPHERES.GRAZING_DEG)))
+    assert separation >= 2.0 - 1e-12 or tile == SPHERES.TILE_RANGE[1]
+    assert tile >= SPHERES.TILE_FREE_PATHS * free_path(phi) or tile == SPHERES.TILE_RANGE[1]
