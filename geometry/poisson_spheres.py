@@ -26,24 +26,34 @@ Defaults (every value used is recorded in the table's scene/ attrs):
   the Lambert sphere's backward phase function decays faster, so this errs deep), capped at
   ``MAX_OPTICAL_DEPTH`` where c -> 1 allows no such depth. Single scattering (max_order = 1)
   needs only tau = ln(1e3), the depth at which the direct beam is down by 1e-3.
-- ``tile`` = the largest of 3 l, 2 r / cos(theta_g) and 16 r, capped at 64 r, theta_g the
-  largest incidence of the run or 85 deg if that is larger (the grazing exits that count):
+- ``tile`` = 64 r (``TILE``). Two conditions keep a periodic tile free of bias; the larger of
+  the two is recorded as ``tile_bias_floor``, the shortest tile that meets both:
   - 3 l: a ray crosses a whole tile without a collision with probability below exp(-3);
-  - 2 r / cos(theta_g): a ray at theta_g from the normal that crosses a whole tile comes back
-    at least a sphere diameter (2 r) away from its own track, so the spheres it meets on its
-    second pass are independent of those it missed on its first (the cylinders of radius r
-    about the two passes do not overlap). Without it, at phi = 0.3 (16 r tile, 1.4 r apart at
-    85 deg) the albedo at theta_i = 85 deg was 0.59 +- 0.06 % too bright against a 64 r tile,
-    with chi^2 per cell 1.56 on 400 cells; with a 32 r tile it was -0.00 +- 0.04 %.
-  Below phi = 0.06 the cap makes the tile shorter than 3 l, and an outgoing ray can pass the
-  periodic images of the spheres that shadow the incoming one ("ghost" shadow hiding, brightest
-  for grazing pairs in the plane of a tile axis). Measured on order-1 tables against the
-  finite-size model (boolean_spheres_single, chi^2 per cell, 1.15 expected): at the 64 r cap,
-  1.01-1.39 for phi = 0.005 and 0.02 up to theta_i = 85 deg; with a 24 r tile, 1.9 and 2.6 at
-  theta_i = 60 and 80 deg for phi = 0.005.
+  - 2 r / cos(theta_g), theta_g the run's largest incidence or 85 deg if that is larger (the
+    grazing exits that count): a ray at theta_g that crosses a whole tile comes back at least a
+    sphere diameter away from its own track, so the spheres it meets on its second pass are
+    independent of those it missed on its first (the cylinders of radius r about the two passes
+    do not overlap). A 16 r tile at phi = 0.3 (1.4 r apart at 85 deg) made the albedo at
+    theta_i = 85 deg 0.59 +- 0.06 % too bright against a 64 r tile, with chi^2 per cell 1.56 on
+    400 cells; a 32 r tile was within -0.00 +- 0.04 %.
+  64 r meets both for phi >= 0.061 and theta_g up to 88 deg. Below phi = 0.061 the tile is
+  shorter than 3 l, and an outgoing ray can pass the periodic images of the spheres that shadow the
+  incoming one ("ghost" shadow hiding, brightest for grazing pairs in the plane of a tile axis).
+  Measured on order-1 tables against the finite-size model (boolean_spheres_single, chi^2 per
+  cell, 1.15 expected): at 64 r, 1.01-1.39 for phi = 0.005 and 0.02 up to theta_i = 85 deg; with
+  a 24 r tile, 1.9 and 2.6 at theta_i = 60 and 80 deg for phi = 0.005.
+  A tile longer than the floor still pays: a realization averages over the whole tile, so the
+  realization-to-realization spread falls as 1 / tile^2, while a path costs about the same. At
+  phi = 0.3 (1 M paths, 32 realizations, 3 incidences) the albedo's relative standard error was
+  0.247 % with a 22.9 r tile in 2.57 s, 0.180 % at 32 r in 2.65 s, 0.135 % at 46 r in 2.98 s and
+  0.104 % at 64 r in 3.14 s (phi = 0.6: 0.182 % in 1.86 s at 22.9 r, 0.080 % in 2.40 s at 64 r):
+  64 r reaches a given error in about a quarter of the time (``benchmarks/speed_accuracy.py``).
+  Beyond 64 r the slab of a dilute or bright medium (up to 40 free paths deep) would hold
+  millions of spheres.
 
 The rule that the defaults meet (issue 12, item f; ``benchmarks/sphere_defaults.py``): every
-bias of the albedo against a tile or a depth 4 times larger stays below 0.3 % (more than a third
+bias of the albedo against a tile or a depth 4 times larger than the floor and the default stays
+below 0.3 % (more than a third
 of the standard error a default run of 1 M paths reaches); the exact spheres have no
 tessellation bias. The depth's bias is bounded without a reference: the slab differs from the
 half space only by the light that crosses its bottom, so it lowers the albedo by at most
@@ -71,10 +81,11 @@ KIND = "poisson_spheres"
 INTEGRATOR = "surface"
 TRANSMISSION_TARGET = 1e-3
 MAX_OPTICAL_DEPTH = 40.0
+#: the default tile period, in radii (see the module doc)
+TILE = 64.0
+#: the shortest tile free of periodic bias spans this many free paths, and keeps the two passes of
+#: a ray at GRAZING_DEG (or the run's largest incidence) a sphere diameter apart (module doc)
 TILE_FREE_PATHS = 3.0
-TILE_RANGE = (16.0, 64.0)
-#: the tile keeps the two passes of a ray at this polar angle (or the run's largest incidence) a
-#: sphere diameter apart (see the module doc)
 GRAZING_DEG = 85.0
 MAX_SUBDIVISIONS = 6
 #: the icosphere budget that stands in for exact spheres on the embreex backend (the former default)
@@ -140,11 +151,11 @@ def default_optical_depth(c: float, max_order: int) -> float:
     return direct / kappa
 
 
-def default_tile(free_path_length: float, theta_max_deg: float) -> float:
-    """The default tile period, in radii (module doc): 3 free paths, and a sphere diameter between
-    the passes of a ray at the grazing angle, within TILE_RANGE."""
+def tile_bias_floor(free_path_length: float, theta_max_deg: float) -> float:
+    """The shortest tile free of periodic bias, in radii (module doc): 3 free paths, and a sphere
+    diameter between the passes of a ray at the grazing angle."""
     grazing = math.radians(max(GRAZING_DEG, theta_max_deg))
-    return min(max(TILE_FREE_PATHS * free_path_length, 2.0 / math.cos(grazing), TILE_RANGE[0]), TILE_RANGE[1])
+    return max(TILE_FREE_PATHS * free_path_length, 2.0 / math.cos(grazing))
 
 
 @lru_cache(maxsize=None)
@@ -190,7 +201,7 @@ def resolve(config) -> dict:
     c = config.material.albedo_bound()
     tau = default_optical_depth(c, config.run.max_order)
     depth = scene.depth if scene.depth is not None else tau * l
-    tile = scene.tile if scene.tile is not None else default_tile(l, max(config.illumination.theta_i_deg))
+    tile = scene.tile if scene.tile is not None else TILE
     if is_exact(scene):
         model = {"sphere_model": "exact", "triangles_per_sphere": 0, "vertex_radius": 1.0, "max_mesh_error": 0.0}
     else:
@@ -210,6 +221,7 @@ def resolve(config) -> dict:
         "optical_depth": depth / l,
         "tile": tile,
         "tile_default": scene.tile is None,
+        "tile_bias_floor": tile_bias_floor(l, max(config.illumination.theta_i_deg)),
         **model,
         "expected_spheres": n * tile * tile * depth,
         "base": config.base.kind if config.base is not None else "none",
