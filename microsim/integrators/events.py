@@ -56,7 +56,7 @@ def exit_top(paths, i, d, sensor, tally):
     if sensor.retro[4] > 0.0:
         ring = retro_ring(d, sensor)
         if ring >= 0:
-            slot = len(sensor.ring_of) + ring
+            slot = sensor.ring_start[-1] + ring
             add_exit(tally, row, slot, paths.weight[i], order)
             if from_base:
                 add_exit(tally, BASE_ROW, slot, paths.weight[i], order)
