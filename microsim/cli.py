@@ -10,6 +10,7 @@ that was ignored when microsim started (nohup, a background job) stays ignored.
 from __future__ import annotations
 
 import contextlib
+import csv
 import math
 import os
 import signal
@@ -21,6 +22,7 @@ from pathlib import Path
 import click
 
 from . import config as config_module
+from . import sweep
 from .compare import ORDER_ROWS
 from .integrators.records import RESULT_ALL_ORDERS
 
@@ -80,8 +82,9 @@ def cli():
 
 @cli.command()
 @click.argument("config_path", metavar="CONFIG.toml", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--out", "out", type=click.Path(dir_okay=False, path_type=Path),
-              help="table to write [default: <config file stem>.h5, in the current directory]")
+@click.option("--out", "out", type=click.Path(path_type=Path),
+              help="table to write [default: <config file stem>.h5, in the current directory]; for a "
+                   "config with [sweep], the directory of its tables [default: <config file stem>]")
 @click.option("--workers", type=click.IntRange(1, 256), default=1, show_default=True, help="worker processes")
 @click.option("--threads", type=click.IntRange(1, MAX_THREADS), default=1, show_default=True,
               help="threads per process, sharing one scene (direct backend)")
@@ -102,10 +105,17 @@ def run(config_path, out, workers, threads, backend, paths, seed, force):
     if backend is not None:
         overrides["run.backend"] = backend
     try:
-        config = config_module.load(config_path, overrides)
+        data = config_module.read(config_path, overrides)
+        points = sweep.points(data)
+        config = config_module.validate(data) if points is None else None
     except config_module.ConfigError as err:
         raise BadInput(str(err)) from None
+    if points is not None:
+        _run_sweep(points, out if out is not None else Path(config_path.stem), workers, threads, force)
+        return
     out = out if out is not None else Path(f"{config_path.stem}.h5")
+    if out.is_dir():
+        raise BadInput(f"--out: {out} is a directory; a config without [sweep] writes one table")
     try:
         plan = runner.Plan.from_config(config, threads, workers)
     except runner.PlanError as err:
@@ -275,6 +285,57 @@ def list_models():
         for p in cls.params:
             cells = (p.name, p.describe(), p.default_text())
             click.echo("    " + "  ".join(f"{c:<{w}}" for c, w in zip(cells, widths)) + f"  {p.doc}")
+
+
+def _run_sweep(points, out_dir: Path, workers: int, threads: int, force: bool) -> None:
+    """Trace every point of a sweep into ``out_dir``: one table per point, named from its values,
+    and ``index.csv`` (rewritten as each point ends: values, table, status, albedo per incidence)."""
+    from . import embree, runner, tables
+
+    if out_dir.exists() and not out_dir.is_dir():
+        raise BadInput(f"--out: {out_dir} is a file; a sweep writes its tables into a directory")
+    if out_dir.is_dir() and any(out_dir.iterdir()) and not force:
+        raise BadInput(f"--out: directory {out_dir} is not empty; pass --force to overwrite its tables")
+    parent = out_dir.parent if str(out_dir.parent) else Path(".")
+    if not parent.is_dir() or not os.access(parent, os.W_OK):
+        raise BadInput(f"--out: directory {parent} does not exist or is not writable")
+    plans = []
+    for point in points:
+        try:
+            plans.append(runner.Plan.from_config(point.config, threads, workers))
+        except runner.PlanError as err:
+            raise BadInput(f"sweep point {point.name}: {err}") from None
+    out_dir.mkdir(exist_ok=True)
+    keys = list(points[0].values)
+    rows = [{"point": p.name, **{k: p.values[k] for k in keys}, "table": f"{p.name}.h5", "status": "pending"}
+            for p in points]
+    _write_index(out_dir, rows)
+    for row, point, plan in zip(rows, points, plans):
+        with _stop_on_signals(), _progress(plan) as advance:
+            try:
+                result = runner.run(point.config, workers=workers, threads=threads, progress=advance)
+            except (embree.EmbreeUnavailable, runner.WorkerFailed) as err:
+                raise click.ClickException(f"sweep point {point.name}: {err}") from None
+            tables.write(out_dir / row["table"], result, point.config, overwrite=force)
+        row["status"] = "done"
+        for t, a in zip(plan.theta_i, result.albedo):
+            row[f"albedo_theta{math.degrees(t):g}"] = f"{a.mean[RESULT_ALL_ORDERS]:.6g}"
+        _write_index(out_dir, rows)
+        click.echo(f"{point.name}: albedo " + ", ".join(
+            f"{math.degrees(t):g}deg {a.mean[RESULT_ALL_ORDERS]:.4f}+-{a.stderr[RESULT_ALL_ORDERS]:.4f}"
+            for t, a in zip(plan.theta_i, result.albedo)) + f" | {result.wall_time:.1f} s")
+    click.echo(f"{len(points)} tables and {sweep.INDEX} written to {out_dir}")
+
+
+def _write_index(out_dir: Path, rows) -> None:
+    """index.csv of a sweep, replaced atomically."""
+    columns = list(dict.fromkeys(key for row in rows for key in row))
+    tmp = out_dir / f".{sweep.INDEX}.tmp"
+    with open(tmp, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, columns, restval="")
+        writer.writeheader()
+        writer.writerows(rows)
+    os.replace(tmp, out_dir / sweep.INDEX)
 
 
 def _check_writable(out: Path, force: bool) -> None:

@@ -97,7 +97,19 @@ class Config(Section):
 
 
 def load(path: str | Path, overrides: dict | None = None) -> Config:
-    """Read and validate a TOML config; ``overrides`` replace keys as {"run.paths": 1000}."""
+    """Read and validate a TOML config; ``overrides`` replace keys as {"run.paths": 1000} (dotted
+    keys of any depth). A config with a ``[sweep]`` table is many configs: see
+    :mod:`microsim.sweep`."""
+    data = read(path, overrides)
+    if "sweep" in data:
+        raise ConfigError("sweep: this config is a sweep of several runs; `microsim run` traces it into a "
+                          "directory (microsim.sweep)")
+    return validate(data)
+
+
+def read(path: str | Path, overrides: dict | None = None) -> dict:
+    """The TOML of ``path`` as a dictionary, with ``overrides`` applied (:func:`set_dotted`);
+    ConfigError (one line) if it cannot be read or parsed."""
     path = Path(path)
     try:
         text = path.read_bytes().decode("utf-8")
@@ -113,9 +125,22 @@ def load(path: str | Path, overrides: dict | None = None) -> Config:
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"config file {str(path)!r} is not valid TOML: {err}") from None
     for dotted, value in (overrides or {}).items():
-        section, key = dotted.split(".")
-        data.setdefault(section, {})[key] = value
-    return validate(data)
+        set_dotted(data, dotted, value)
+    return data
+
+
+def set_dotted(data: dict, dotted: str, value) -> None:
+    """data["a"]["b"]...["z"] = value for the key "a.b...z" (any depth), making the tables on the
+    way; ConfigError if the key is empty or passes through a value that is not a table."""
+    parts = dotted.split(".")
+    if not all(parts):
+        raise ConfigError(f"{dotted!r}: not a dotted key (like scene.volume_fraction)")
+    node = data
+    for depth, part in enumerate(parts[:-1]):
+        node = node.setdefault(part, {})
+        if not isinstance(node, dict):
+            raise ConfigError(f"{dotted}: {'.'.join(parts[:depth + 1])} is a value, not a table")
+    node[parts[-1]] = value
 
 
 def validate(data: dict) -> Config:

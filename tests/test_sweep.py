@@ -1,0 +1,111 @@
+"""Sweeps (CONVENTIONS 4, microsim/sweep.py): one table per point, each the same as the point run
+alone, bit for bit; an index; bad sweeps refused in one line before anything is written."""
+
+import csv
+
+import numpy as np
+import pytest
+
+from microsim import config, tables
+from microsim.cli import main
+from microsim.sweep import INDEX
+
+BASE = """[scene]
+kind = "poisson_spheres"
+volume_fraction = 0.2
+tile = 8.0
+depth = 4.0
+[material]
+kind = "lambert"
+albedo = 0.8
+[illumination]
+theta_i_deg = [0.0, 60.0]
+[sensor]
+cells = 50
+[run]
+paths = 400
+realizations = 2
+seed = 3
+"""
+GRID = BASE + """[sweep]
+"scene.volume_fraction" = [0.1, 0.3]
+"material.albedo" = [0.5, 0.7, 0.9]
+"""
+#: provenance that differs between any two runs
+VOLATILE = {"created_utc", "wall_time_s"}
+
+
+def same_table(a, b) -> bool:
+    x, y = tables.load(a), tables.load(b)
+    if x.arrays.keys() != y.arrays.keys():
+        return False
+    attrs = {k: v for k, v in x.attrs.items() if k not in VOLATILE} == {k: v for k, v in y.attrs.items() if k not in VOLATILE}
+    return attrs and all(np.array_equal(x.arrays[k], y.arrays[k]) for k in x.arrays)
+
+
+def test_grid_sweep_writes_every_point_as_if_run_alone_and_an_index(tmp_path, capsys):
+    path = tmp_path / "grid.toml"
+    path.write_text(GRID)
+    assert main(["run", str(path), "--out", str(tmp_path / "grid")]) == 0
+    with open(tmp_path / "grid" / INDEX) as handle:
+        rows = list(csv.DictReader(handle))
+    assert len(rows) == 6 and {r["status"] for r in rows} == {"done"}
+    assert sorted(p.name for p in (tmp_path / "grid").iterdir()) == sorted([INDEX] + [r["table"] for r in rows])
+    for row in rows:
+        alone = tmp_path / f"{row['point']}.toml"
+        alone.write_text(BASE.replace("volume_fraction = 0.2", f"volume_fraction = {row['scene.volume_fraction']}")
+                         .replace("albedo = 0.8", f"albedo = {row['material.albedo']}"))
+        assert main(["run", str(alone), "--out", str(tmp_path / f"{row['point']}.h5")]) == 0
+        assert same_table(tmp_path / "grid" / row["table"], tmp_path / f"{row['point']}.h5"), row["point"]
+        table = tables.load(tmp_path / "grid" / row["table"])
+        assert float(row["albedo_theta0"]) == pytest.approx(table.albedo[0], rel=1e-5)
+
+
+def test_zip_sweep_pairs_the_values(tmp_path, capsys):
+    path = tmp_path / "zip.toml"
+    path.write_text(BASE + '[sweep]\nmode = "zip"\n"scene.volume_fraction" = [0.1, 0.3]\n"run.seed" = [5, 6]\n')
+    assert main(["run", str(path), "--out", str(tmp_path / "zip")]) == 0
+    with open(tmp_path / "zip" / INDEX) as handle:
+        rows = list(csv.DictReader(handle))
+    assert [(r["scene.volume_fraction"], r["run.seed"]) for r in rows] == [("0.1", "5"), ("0.3", "6")]
+    assert tables.load(tmp_path / "zip" / rows[1]["table"]).attrs["seed"] == 6
+
+
+@pytest.mark.parametrize("sweep, key", [
+    ('"scene.volume_fractio" = [0.1]', "scene.volume_fractio"),
+    ('"scene.volume_fraction" = [0.1, 0.95]', "scene.volume_fraction"),
+    ('"scene.volume_fraction" = []', "sweep.scene.volume_fraction"),
+    ('"scene.volume_fraction" = 0.1', "sweep.scene.volume_fraction"),
+    ('mode = "cross"\n"scene.volume_fraction" = [0.1]', "sweep.mode"),
+    ('mode = "zip"\n"scene.volume_fraction" = [0.1, 0.2]\n"material.albedo" = [0.5]', "mode zip"),
+    ('"scene.volume_fraction" = [0.1, 0.1]', "same values"),
+    ('"material.albedo.x" = [0.5]', "material.albedo"),
+])
+def test_bad_sweeps_are_refused_in_one_line_writing_nothing(sweep, key, tmp_path, capsys):
+    path = tmp_path / "bad.toml"
+    path.write_text(BASE + "[sweep]\n" + sweep + "\n")
+    assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and key in lines[0] and "Traceback" not in captured.err, captured.err
+    assert list(tmp_path.iterdir()) == [path]
+
+
+def test_a_sweep_does_not_write_into_a_directory_that_holds_files(tmp_path, capsys):
+    path = tmp_path / "grid.toml"
+    path.write_text(GRID)
+    (tmp_path / "grid").mkdir()
+    (tmp_path / "grid" / "keep.h5").write_text("not ours")
+    assert main(["run", str(path), "--out", str(tmp_path / "grid")]) == 2
+    assert "--force" in capsys.readouterr().err
+    assert [p.name for p in (tmp_path / "grid").iterdir()] == ["keep.h5"]
+
+
+def test_overrides_of_any_depth():
+    data = {"scene": {"kind": "plane"}}
+    config.set_dotted(data, "name", "top")
+    config.set_dotted(data, "a.b.c", 1)
+    config.set_dotted(data, "scene.kind", "plane")
+    assert data == {"scene": {"kind": "plane"}, "name": "top", "a": {"b": {"c": 1}}}
+    with pytest.raises(config.ConfigError, match="scene.kind is a value"):
+        config.set_dotted(data, "scene.kind.x", 1)
