@@ -45,6 +45,7 @@ from microsim.boolean_model import radius_over_free_path
 from microsim.fit import fit
 from microsim.models.radiative_transfer import single_scattering
 from microsim.sensor import Sensor
+from opposition import half_width
 from report import OUT, save_figures
 
 PHIS = [0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.3, 0.45, 0.6]
@@ -231,14 +232,7 @@ def opposition(spheres, medium):
             base = ratio[-OUTER_RINGS:].mean()
             enhancement = ratio / base - 1.0
             height, height_se = float(enhancement[0]), float(ratio_se[0] / base)
-            hwhm = None
-            below = np.flatnonzero(enhancement < height / 2.0)
-            if height > 3.0 * height_se and below.size and below[0] > 0:
-                j = below[0]
-                x0, x1, y0, y1 = centre[j - 1], centre[j], enhancement[j - 1], enhancement[j]
-                hwhm = float(x0 + (height / 2.0 - y0) * (x1 - x0) / (y1 - y0))
-            elif height > 3.0 * height_se and below.size and below[0] == 0:
-                hwhm = float(np.degrees(hi[0]) / 2.0)  # narrower than ring 0: an upper bound
+            hwhm = half_width(centre, enhancement) if height > 3.0 * height_se else None
             rows.append({"theta_i_deg": THETA_I_DEG[i], "height": height, "height_stderr": height_se,
                          "hwhm_deg": hwhm, "enhancement": enhancement.tolist(),
                          "enhancement_stderr": (ratio_se / base).tolist()})

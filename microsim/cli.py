@@ -137,10 +137,7 @@ def run(config_path, out, workers, threads, backend, paths, seed, force):
                 tables.write(path, result, config, overwrite=force)
         except tables.TableExists as err:
             raise BadInput(f"--out: {err}") from None
-    azimuths = len(set(plan.phi_i.tolist())) > 1  # paired azimuths: name each incidence by both angles
-    summaries = [", ".join(
-        f"{math.degrees(t):g}{f'/{math.degrees(p):g}' if azimuths else ''}deg {a.mean[RESULT_ALL_ORDERS]:.4f}+-{a.stderr[RESULT_ALL_ORDERS]:.4f}"
-        for t, p, a in zip(plan.theta_i, plan.phi_i, result.albedo)) for result in results]
+    summaries = [_albedo_summary(plan, result) for result in results]
     rate = total / results[0].wall_time
     timing = (f"{results[0].wall_time:.1f} s, {rate:.3g} paths/s, {workers} worker(s) x {plan.threads} thread(s), "
               f"backend {plan.backend}")
@@ -321,10 +318,18 @@ def _run_sweep(points, out_dir: Path, workers: int, threads: int, force: bool) -
         for t, a in zip(plan.theta_i, result.albedo):
             row[f"albedo_theta{math.degrees(t):g}"] = f"{a.mean[RESULT_ALL_ORDERS]:.6g}"
         _write_index(out_dir, rows)
-        click.echo(f"{point.name}: albedo " + ", ".join(
-            f"{math.degrees(t):g}deg {a.mean[RESULT_ALL_ORDERS]:.4f}+-{a.stderr[RESULT_ALL_ORDERS]:.4f}"
-            for t, a in zip(plan.theta_i, result.albedo)) + f" | {result.wall_time:.1f} s")
+        click.echo(f"{point.name}: albedo {_albedo_summary(plan, result)} | {result.wall_time:.1f} s")
     click.echo(f"{len(points)} tables and {sweep.INDEX} written to {out_dir}")
+
+
+def _albedo_summary(plan, result) -> str:
+    """The albedo of every incidence with its standard error, named by theta_i (and phi_i where
+    the incidences pair their azimuths)."""
+    azimuths = len(set(plan.phi_i.tolist())) > 1
+    return ", ".join(
+        f"{math.degrees(t):g}{f'/{math.degrees(p):g}' if azimuths else ''}deg "
+        f"{a.mean[RESULT_ALL_ORDERS]:.4f}+-{a.stderr[RESULT_ALL_ORDERS]:.4f}"
+        for t, p, a in zip(plan.theta_i, plan.phi_i, result.albedo))
 
 
 def _write_index(out_dir: Path, rows) -> None:
