@@ -180,9 +180,10 @@ def level_for(mesh_error: float) -> int:
 
 
 #: memory per sphere once built: shape rows and Embree's copy and BVH (exact), or per triangle of
-#: an icosphere (vertices, faces, embreex's copy and BVH); 215 B a triangle measured on phi = 0.6
-#: at level 3 (benchmarks/memory.py)
-EXACT_SPHERE_BYTES, TRIANGLE_BYTES = 300, 250
+#: an icosphere (vertices, faces, Embree's copy and BVH). Measured peaks (benchmarks/memory.py,
+#: build included): 140 B a triangle on the direct backend (phi 0.1-0.6, levels 1-3), 142-165 B
+#: on embreex (levels 3 and 2); 180 B keeps a margin without refusing scenes that fit
+EXACT_SPHERE_BYTES, TRIANGLE_BYTES = 300, 180
 
 
 def scene_bytes(resolved: dict) -> int:

@@ -1,10 +1,12 @@
 """Command line (CONVENTIONS 7): ``microsim run``, ``microsim compare``, ``microsim models``.
 
 Bad input of any kind (CONVENTIONS 9) ends with one line on stderr naming the key or flag and
-what is accepted, exit status 2, no traceback, and no output file. A run stopped by SIGINT,
-SIGTERM or SIGHUP stops its workers, writes nothing, says so in one line and then dies of that
-signal (a shell reports 130, 143, 129; a shell loop stops on Ctrl-C as it should). A signal
-that was ignored when microsim started (nohup, a background job) stays ignored.
+what is accepted, exit status 2, no traceback, and no output file. A run keeps its finished
+units in ``<table>.partial`` until its table is written (:mod:`microsim.unit_store`): a run
+stopped by SIGINT, SIGTERM or SIGHUP stops its workers, writes no table, says in one line how
+many units it kept for ``--resume`` and then dies of that signal (a shell reports 130, 143,
+129; a shell loop stops on Ctrl-C as it should); one killed outright resumes the same way. A
+signal that was ignored when microsim started (nohup, a background job) stays ignored.
 """
 
 from __future__ import annotations
@@ -13,10 +15,12 @@ import contextlib
 import csv
 import math
 import os
+import re
 import signal
 import sys
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import click
@@ -27,6 +31,11 @@ from .compare import ORDER_ROWS
 from .integrators.records import RESULT_ALL_ORDERS
 
 EXIT_BAD_INPUT = 2
+#: ``--executor`` choices: the keys of microsim.runner.EXECUTORS (named here so that --help
+#: loads no numba)
+EXECUTORS = ("local", "dask")
+#: what a Dask scheduler's address looks like: [tcp|tls|ws|wss://]host:port
+SCHEDULER_ADDRESS = re.compile(r"^((tcp|tls|ws|wss)://)?(?P<host>[A-Za-z0-9._\-\[\]:]+):(?P<port>\d{1,5})$")
 #: threads a process may run (Python threads, each tracing in a numba call without the GIL)
 MAX_THREADS = 256
 
@@ -42,33 +51,64 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 class Stopped(click.ClickException):
     """A run stopped by a signal: exit status 128 + its number (:func:`main` then dies of it)."""
 
-    def __init__(self, signum: int):
-        super().__init__(f"stopped by {signal.Signals(signum).name}; no table written")
+    def __init__(self, signum: int, message: str = "stopped by {name}; no table written"):
+        super().__init__(message.format(name=signal.Signals(signum).name))
         self.signum = signum
         self.exit_code = 128 + signum
+
+    def add_note(self, text: str) -> None:
+        """Append ``text`` (what was kept) to the one line."""
+        self.message += text
+
+
+@dataclass(frozen=True)
+class Options:
+    """How ``microsim run`` traces: the flags shared by a run and every point of a sweep."""
+
+    workers: int
+    threads: int
+    force: bool
+    resume: bool
+    executor: str
+    scheduler: str | None
 
 
 @contextlib.contextmanager
 def _stop_on_signals():
     """Within the block, the first of STOP_SIGNALS raises :class:`Stopped` (in the main thread,
     between bytecodes: the runner's clean-up then kills its workers); later ones are ignored while
-    it stops. Signals ignored on entry stay ignored; outside the main thread nothing changes."""
+    it stops. Signals ignored on entry stay ignored; outside the main thread nothing changes.
+
+    Yields ``hold``: within ``with hold():`` (writing the tables once tracing is over) a signal is
+    only noted, and raises :class:`Stopped` when the block ends, saying the work was done."""
+    stopping, holding = [], []
+
+    @contextlib.contextmanager
+    def hold():
+        holding.append(True)
+        try:
+            yield
+        finally:
+            holding.pop()
+        if stopping:
+            raise Stopped(stopping[0], "stopped by {name} once its tables were written")
+
     if threading.current_thread() is not threading.main_thread():
-        yield
+        yield hold
         return
-    stopping = []
 
     def stop(signum, frame):
         if not stopping:
             stopping.append(signum)
-            raise Stopped(signum)
+            if not holding:
+                raise Stopped(signum)
 
     previous = {signum: signal.getsignal(signum) for signum in STOP_SIGNALS}
     for signum, handler in previous.items():
         if handler is not signal.SIG_IGN:
             signal.signal(signum, stop)
     try:
-        yield
+        yield hold
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
@@ -92,10 +132,17 @@ def cli():
               help="how Embree is called (overrides run.backend)")
 @click.option("--paths", type=click.IntRange(1, 10**12), help="paths per incidence (overrides run.paths)")
 @click.option("--seed", type=click.IntRange(0, 2**63 - 1), help="random seed (overrides run.seed)")
-@click.option("--force", is_flag=True, help="overwrite an existing table")
-def run(config_path, out, workers, threads, backend, paths, seed, force):
+@click.option("--force", is_flag=True, help="overwrite an existing table (and, without --resume, discard the units "
+                                           "an interrupted run kept)")
+@click.option("--resume", is_flag=True, help="continue an interrupted run from the units it kept in <table>.partial")
+@click.option("--executor", type=click.Choice(list(EXECUTORS)), default="local", show_default=True,
+              help="local: this process or --workers forked processes; dask: tasks on a dask.distributed "
+                   "cluster (a LocalCluster of --workers processes without --scheduler)")
+@click.option("--scheduler", metavar="ADDRESS", help="address of a Dask scheduler, e.g. tcp://10.0.0.5:8786 "
+                                                      "(with --executor dask)")
+def run(config_path, out, workers, threads, backend, paths, seed, force, resume, executor, scheduler):
     """Trace CONFIG.toml and write its HDF5 table."""
-    from . import embree, runner, tables
+    from . import runner, tables, unit_store
 
     overrides = {}
     if paths is not None:
@@ -110,8 +157,13 @@ def run(config_path, out, workers, threads, backend, paths, seed, force):
         config = config_module.validate(data) if points is None else None
     except config_module.ConfigError as err:
         raise BadInput(str(err)) from None
+    if scheduler is not None and executor != "dask":
+        raise BadInput("--scheduler: a Dask scheduler's address is taken with --executor dask only")
+    if executor == "dask":
+        _check_dask(scheduler)
+    options = Options(workers, threads, force, resume, executor, scheduler)
     if points is not None:
-        _run_sweep(points, out if out is not None else Path(config_path.stem), workers, threads, force)
+        _run_sweep(points, out if out is not None else Path(config_path.stem), options)
         return
     out = out if out is not None else Path(f"{config_path.stem}.h5")
     if out.is_dir():
@@ -122,25 +174,14 @@ def run(config_path, out, workers, threads, backend, paths, seed, force):
         raise BadInput(str(err)) from None
     # a run of several albedos writes one table each, named from --out with the albedo appended
     outs = [out.with_name(f"{out.stem}_albedo{c:g}{out.suffix}") for c in plan.albedos] or [out]
-    for path in outs:
-        _check_writable(path, force)
     total = plan.paths * plan.n_incidences
-    with _stop_on_signals(), _progress(plan) as advance:
-        try:
-            results = runner.run_albedos(config, workers=workers, threads=threads, progress=advance)
-        except (embree.EmbreeUnavailable, runner.WorkerFailed) as err:  # in a worker, one line each
-            raise click.ClickException(str(err)) from None
-        except runner.PlanError as err:
-            raise BadInput(str(err)) from None
-        try:
-            for path, result in zip(outs, results):
-                tables.write(path, result, config, overwrite=force)
-        except tables.TableExists as err:
-            raise BadInput(f"--out: {err}") from None
+    results = _trace(config, plan, outs, unit_store.store_path(out), options)
     summaries = [_albedo_summary(plan, result) for result in results]
-    rate = total / results[0].wall_time
-    timing = (f"{results[0].wall_time:.1f} s, {rate:.3g} paths/s, {workers} worker(s) x {plan.threads} thread(s), "
-              f"backend {plan.backend}")
+    traced = total * results[0].units_traced / len(plan.units)
+    rate = traced / results[0].wall_time
+    timing = (f"{results[0].wall_time:.1f} s, {rate:.3g} paths/s, {_where(plan, options)}, backend {plan.backend}")
+    if results[0].units_resumed:
+        timing += f"; {results[0].units_resumed} of {len(plan.units)} units resumed, {results[0].units_traced} traced"
     if len(results) == 1:
         click.echo(f"albedo {summaries[0]} | {timing}")
     else:
@@ -284,42 +325,149 @@ def list_models():
             click.echo("    " + "  ".join(f"{c:<{w}}" for c, w in zip(cells, widths)) + f"  {p.doc}")
 
 
-def _run_sweep(points, out_dir: Path, workers: int, threads: int, force: bool) -> None:
+def _run_sweep(points, out_dir: Path, options: Options) -> None:
     """Trace every point of a sweep into ``out_dir``: one table per point, named from its values,
-    and ``index.csv`` (rewritten as each point ends: values, table, status, albedo per incidence)."""
-    from . import embree, runner, tables
+    and ``index.csv`` (rewritten as each point ends: values, table, status, albedo per incidence).
+    With --resume, a point whose table is there (made from the same config) is kept as it is,
+    and the point that was interrupted resumes from its units."""
+    from . import runner, tables, unit_store
 
     if out_dir.exists() and not out_dir.is_dir():
         raise BadInput(f"--out: {out_dir} is a file; a sweep writes its tables into a directory")
-    if out_dir.is_dir() and any(out_dir.iterdir()) and not force:
-        raise BadInput(f"--out: directory {out_dir} is not empty; pass --force to overwrite its tables")
+    if out_dir.is_dir() and any(out_dir.iterdir()) and not (options.force or options.resume):
+        raise BadInput(f"--out: directory {out_dir} is not empty; pass --resume to continue the sweep in it, or "
+                       "--force to overwrite its tables")
     parent = out_dir.parent if str(out_dir.parent) else Path(".")
     if not parent.is_dir() or not os.access(parent, os.W_OK):
         raise BadInput(f"--out: directory {parent} does not exist or is not writable")
-    plans = []
-    for point in points:
+    plans, kept = [], []
+    for point in points:  # every refusal before anything is traced
+        path = out_dir / f"{point.name}.h5"
         try:
-            plans.append(runner.Plan.from_config(point.config, threads, workers))
-        except runner.PlanError as err:
+            plan = runner.Plan.from_config(point.config, options.threads, options.workers)
+            kept.append(options.resume and _finished_point(path, point))
+            if not kept[-1]:
+                if options.scheduler is None:
+                    runner.check_memory(plan, plan.build_sensor(), options.workers, spawned=options.executor == "dask")
+                unit_store.UnitStore.check(unit_store.store_path(path), plan, options.resume, options.force)
+        except (runner.PlanError, unit_store.StoreMismatch) as err:
             raise BadInput(f"sweep point {point.name}: {err}") from None
+        plans.append(plan)
     out_dir.mkdir(exist_ok=True)
     keys = list(points[0].values)
     rows = [{"point": p.name, **{k: p.values[k] for k in keys}, "table": f"{p.name}.h5", "status": "pending"}
             for p in points]
+    for row, point, plan, done in zip(rows, points, plans, kept):
+        if done:
+            table = tables.load(out_dir / row["table"])
+            _index_albedos(row, plan, table.arrays["albedo"])
     _write_index(out_dir, rows)
-    for row, point, plan in zip(rows, points, plans):
-        with _stop_on_signals(), _progress(plan) as advance:
-            try:
-                result = runner.run(point.config, workers=workers, threads=threads, progress=advance)
-            except (embree.EmbreeUnavailable, runner.WorkerFailed) as err:
-                raise click.ClickException(f"sweep point {point.name}: {err}") from None
-            tables.write(out_dir / row["table"], result, point.config, overwrite=force)
-        row["status"] = "done"
-        for t, a in zip(plan.theta_i, result.albedo):
-            row[f"albedo_theta{math.degrees(t):g}"] = f"{a.mean[RESULT_ALL_ORDERS]:.6g}"
+    for row, point, plan, done in zip(rows, points, plans, kept):
+        if done:
+            unit_store.UnitStore(unit_store.store_path(out_dir / row["table"]), {}).clear()  # outlived its table
+            click.echo(f"{point.name}: kept (its table was finished)")
+            continue
+        path = out_dir / row["table"]
+        result = _trace(point.config, plan, [path], unit_store.store_path(path), options,
+                        label=f"sweep point {point.name}: ")[0]
+        _index_albedos(row, plan, [a.mean[RESULT_ALL_ORDERS] for a in result.albedo])
         _write_index(out_dir, rows)
         click.echo(f"{point.name}: albedo {_albedo_summary(plan, result)} | {result.wall_time:.1f} s")
     click.echo(f"{len(points)} tables and {sweep.INDEX} written to {out_dir}")
+
+
+def _finished_point(path: Path, point) -> bool:
+    """Whether a sweep point's table is there and was made from the point's config; BadInput if
+    a table of another config holds its name."""
+    from . import tables
+
+    if not path.exists():
+        return False
+    try:
+        same = tables.load(path).attrs["config_toml"] == tables.config_to_toml(point.config)
+    except (OSError, KeyError, tables.TableError):
+        same = False
+    if not same:
+        raise BadInput(f"--resume: {path} is not the table of sweep point {point.name} (another config, or "
+                       "damaged); pass --force to overwrite it")
+    return True
+
+
+def _index_albedos(row: dict, plan, albedos) -> None:
+    row["status"] = "done"
+    for t, a in zip(plan.theta_i, albedos):
+        row[f"albedo_theta{math.degrees(t):g}"] = f"{a:.6g}"
+
+
+def _trace(config, plan, outs, directory: Path, options: Options, label: str = ""):
+    """Trace a planned config and write its tables (one per albedo) to ``outs``; finished units
+    are kept in the unit store ``directory`` until the tables are written. A failure or a signal
+    says in its one line how many units were kept for --resume; a refusal keeps them all."""
+    from . import embree, executors, runner, tables, unit_store
+
+    for path in outs:
+        _check_writable(path, options.force)
+    try:
+        if options.scheduler is None:  # before the store is touched: a refusal must not cost a unit
+            runner.check_memory(plan, plan.build_sensor(), options.workers, spawned=options.executor == "dask")
+        store = unit_store.UnitStore.open(directory, plan, options.resume, options.force)
+    except (runner.PlanError, unit_store.StoreMismatch) as err:
+        raise BadInput(f"{label}{err}") from None
+    with _stop_on_signals() as hold, _progress(plan) as advance:
+        try:
+            results = runner.run_albedos(config, options.workers, options.threads, advance, options.executor,
+                                         options.scheduler, store)
+            with hold():
+                refused = []  # a table whose name was taken meanwhile is kept under a fresh name: write them all
+                for path, result in zip(outs, results):
+                    try:
+                        tables.write(path, result, config, overwrite=options.force)
+                    except tables.TableExists as err:
+                        refused.append(err)
+                store.clear()
+            if refused:
+                raise refused[0]
+        except (embree.EmbreeUnavailable, executors.WorkerFailed) as err:  # in a worker, one line each
+            raise click.ClickException(f"{label}{err}{_kept(store, plan)}") from None
+        except (executors.SchedulerUnreachable, runner.PlanError) as err:
+            raise BadInput(f"{label}{err}{_kept(store, plan)}") from None
+        except tables.TableExists as err:
+            raise BadInput(f"--out: {err}") from None
+        except Stopped as stop:
+            if store.directory.exists():
+                stop.add_note(_kept(store, plan))
+            raise
+        finally:
+            store.release()
+    return results
+
+
+def _kept(store, plan) -> str:
+    """What a stopped run leaves for --resume, as the end of its one line (the store goes if empty)."""
+    saved = len(store.saved_units())
+    if not saved:
+        store.clear()
+        return ""
+    return f"; {saved} of {len(plan.units)} units kept in {store.directory} (rerun with --resume to finish)"
+
+
+def _where(plan, options: Options) -> str:
+    if options.executor == "dask":
+        return (f"dask at {options.scheduler}" if options.scheduler else
+                f"dask LocalCluster of {options.workers} worker(s)") + f" x {plan.threads} thread(s)"
+    return f"{options.workers} worker(s) x {plan.threads} thread(s)"
+
+
+def _check_dask(scheduler) -> None:
+    """BadInput unless dask.distributed imports and ``scheduler`` (if given) is an address."""
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        raise BadInput("--executor dask: dask.distributed is not installed (pip install 'microsim[dask]')") from None
+    address = SCHEDULER_ADDRESS.match(scheduler) if scheduler is not None else None
+    if scheduler is not None and (address is None or not 0 < int(address["port"]) < 65536):
+        raise BadInput(f"--scheduler {scheduler!r}: expected a Dask scheduler address [tcp|tls|ws|wss://]host:port "
+                       "(port 1-65535), e.g. tcp://10.0.0.5:8786")
 
 
 def _albedo_summary(plan, result) -> str:
@@ -354,11 +502,12 @@ def _check_writable(out: Path, force: bool) -> None:
 
 
 class _progress:
-    """A rich progress bar on a terminal, nothing otherwise; yields ``advance(unit, paths)``.
+    """A rich progress bar on a terminal, nothing otherwise; yields ``advance(unit, paths, resumed)``.
 
     It counts units (realization x incidence) and paths per incidence, as ``--paths`` does, and
-    its time left is the mean rate since the start applied to what is left (steadier than a
-    recent-rate estimate when units end in bursts, as they do with workers)."""
+    its time left is the mean rate of the units traced since the start applied to what is left
+    (steadier than a recent-rate estimate when units end in bursts, as they do with workers;
+    units taken from a resumed run's store count as done, not in the rate)."""
 
     def __init__(self, plan):
         self.plan = plan
@@ -366,7 +515,7 @@ class _progress:
 
     def __enter__(self):
         if not sys.stderr.isatty():
-            return lambda unit, paths: None
+            return lambda unit, paths, resumed: None
         from rich.console import Console
         from rich.progress import BarColumn, Progress, TextColumn
 
@@ -376,14 +525,16 @@ class _progress:
         self.bar.start()
         units = len(plan.units)
         task = self.bar.add_task("trace", total=units, status=f"0/{units} units")
+        resumed = []
 
-        def advance(unit, paths):
+        def advance(unit, paths, from_store):
             self.bar.advance(task, 1)
-            done = int(self.bar.tasks[0].completed)
-            left = (time.monotonic() - start) * (units - done) / done
+            resumed.append(from_store)
+            done, traced = len(resumed), len(resumed) - sum(resumed)
+            left = f"{(time.monotonic() - start) * (units - done) / traced:.0f} s left" if traced else "starting"
             per_incidence = done * plan.paths_per_realization // plan.n_incidences
             self.bar.update(task, status=f"{done}/{units} units, {per_incidence:,} of {plan.paths:,} paths per "
-                                         f"incidence, {left:.0f} s left")
+                                         f"incidence, {left}")
         return advance
 
     def __exit__(self, *exc):

@@ -7,28 +7,18 @@ include the variance of the geometry, which is far from negligible on a finite t
 
 Work is cut into units (realization r, incidence i). The random stream of a unit is keyed by
 (seed, r, i) and the geometry of realization r by (seed, r), so a unit's tally does not
-depend on which process traced it. Units are split into contiguous blocks, one per worker (a
-worker builds each realization of its block once), and tallies are summed in unit order
-whatever order they arrive in: the table is bit-identical for any number of workers.
-
-Workers are forked processes that die with the run: each asks Linux for SIGKILL when its parent
-dies (prctl PR_SET_PDEATHSIG, so even a SIGKILL of the main process takes them along), ignores
-SIGINT (a terminal sends it to the whole group; the main process decides), and is killed by the
-main process as soon as the run ends in any other way than success (an exception, a signal
-turned into one by the CLI); a signal in the microseconds of a worker's start can leave that
-worker to PR_SET_PDEATHSIG alone, which kills it when the main process exits. Memory is
-estimated before anything is traced
-(:func:`memory_estimate`) and a run that cannot fit is refused.
+depend on which process traced it. :func:`run_albedos` plans the run, takes the units a
+:class:`~microsim.unit_store.UnitStore` kept from an interrupted run, has an executor
+(:mod:`microsim.executors`: this process, forked workers, or Dask) trace the others, keeps
+each new unit in the store as it ends, and sums tallies in unit order whatever order they
+arrive in: the table is bit-identical for any number of workers, any executor, and any number
+of interruptions. Memory is estimated before anything is traced (:func:`memory_estimate`) and
+a run that cannot fit is refused.
 """
 
 from __future__ import annotations
 
-import ctypes
 import math
-import multiprocessing
-import multiprocessing.connection
-import os
-import signal
 import time
 from dataclasses import dataclass, field
 
@@ -37,11 +27,10 @@ import numpy as np
 import geometry
 
 from .frames import direction
-from . import embree, integrators
+from . import embree, executors, integrators
 from .integrators import fused, wavefront
 from .integrators.records import BASE_ROW, COUNT_NAMES, ENERGY_NAMES, ORDERS, RESULT_ALL_ORDERS, RESULT_ROWS, \
     SINGLE_ALBEDO, TALLY_ROWS, per_albedo
-from .rng import geometry_rng, stream_key
 from .sensor import Sensor
 
 
@@ -209,6 +198,8 @@ class Result:
     #: brdf's, and the rings' projected solid angles about that incidence (n_rings,)
     retro: list = field(default_factory=list)
     retro_projected_solid_angle: list = field(default_factory=list)
+    units_resumed: int = 0  # units taken from a unit store (microsim.unit_store)
+    units_traced: int = 0  # units traced by this call
 
     @property
     def paths(self) -> np.ndarray:
@@ -269,23 +260,6 @@ class _Reducer:
         return self.next == len(self.units)
 
 
-def trace_units(plan: Plan, units, emit) -> None:
-    """Trace ``units`` in order, calling ``emit(unit, tally, scene_info)`` after each."""
-    sensor = plan.build_sensor()
-    generator = plan.generator
-    seed, max_order = plan.config.run.seed, plan.config.run.max_order
-    current, tracer = None, None
-    for r, i in units:
-        if r != current:
-            scene = tracer = None  # the previous realization's scene and acceleration structure go first
-            scene = generator.generate(plan.scene, plan.config, geometry_rng(seed, r))
-            tracer = plan.tracer_class(scene, sensor, **plan.tracer_options)
-            current = r
-        tally = tracer.trace(plan.incidence_direction(i), plan.paths_per_realization, stream_key(seed, r, i),
-                             max_order, plan.albedo_scale)
-        emit((r, i), tally, scene.info)
-
-
 #: what the main process holds before any scene (interpreter, numpy, numba, Embree, kernels):
 #: 225 MiB resident measured on phi = 0.3
 PROCESS_BYTES = 250 * 2**20
@@ -294,16 +268,14 @@ PROCESS_BYTES = 250 * 2**20
 WORKER_BYTES = 100 * 2**20
 #: bytes a path row of the embreex backend takes while its batch is traced (row, ray, outputs)
 PATH_ROW_BYTES = 80
-#: Linux prctl option: the signal a process gets when its parent dies
-PR_SET_PDEATHSIG = 1
 
 
-def memory_estimate(plan: Plan, sensor: Sensor, workers: int) -> int:
-    """Peak bytes of a run, all processes: each tracing process (the main one, or one forked
-    worker per block of units) holds one realization's scene (the generator's ``scene_bytes``), a
-    batch of path rows or the chunk tallies of a wave, and its unit's tally; the main process
-    sums into per-incidence estimates and buffers the tallies of units that arrive early (up to
-    all but one worker's share)."""
+def memory_estimate(plan: Plan, sensor: Sensor, workers: int, spawned: bool = False) -> int:
+    """Peak bytes of a run, all processes: each tracing process (the main one, or one worker per
+    block of units, forked or, with ``spawned``, started afresh as Dask's are) holds one
+    realization's scene (the generator's ``scene_bytes``), a batch of path rows or the chunk
+    tallies of a wave, and its unit's tally; the main process sums into per-incidence estimates
+    and buffers the tallies of units that arrive early (up to all but one worker's share)."""
     tally = max(1, len(plan.albedos)) * TALLY_ROWS * sensor.tally_width * 8
     if plan.backend == "embreex":
         paths = min(plan.paths_per_realization, wavefront.BATCH_PATHS) * PATH_ROW_BYTES
@@ -311,10 +283,10 @@ def memory_estimate(plan: Plan, sensor: Sensor, workers: int) -> int:
         paths = fused.WAVE_CHUNKS_PER_THREAD * plan.threads * (tally + 1024)
     tracing = plan.generator.scene_bytes(plan.scene) + paths + 2 * tally
     units = len(plan.units)
-    processes = len(split(plan.units, max(1, workers)))
+    processes = len(executors.split(plan.units, max(1, workers)))
     reducing = (3 * max(1, len(plan.albedos)) * plan.n_incidences * RESULT_ROWS * sensor.tally_width * 8
                  + units * tally * (processes - 1) // processes)
-    workers_bytes = WORKER_BYTES * processes if processes > 1 else 0
+    workers_bytes = (PROCESS_BYTES if spawned else WORKER_BYTES) * processes if processes > 1 or spawned else 0
     return PROCESS_BYTES + workers_bytes + tracing * processes + reducing
 
 
@@ -339,9 +311,9 @@ def available_memory() -> int | None:
     return free
 
 
-def check_memory(plan: Plan, sensor: Sensor, workers: int) -> None:
+def check_memory(plan: Plan, sensor: Sensor, workers: int, spawned: bool = False) -> None:
     """Refuse (PlanError, one line) a run whose :func:`memory_estimate` exceeds the free memory."""
-    need, free = memory_estimate(plan, sensor, workers), available_memory()
+    need, free = memory_estimate(plan, sensor, workers, spawned), available_memory()
     if free is not None and need > free:
         raise PlanError(f"this run needs about {need / 2**30:.3g} GiB of memory (scene "
                         f"{plan.generator.scene_bytes(plan.scene) / 2**30:.3g} GiB a tracing process, sensor.cells "
@@ -349,107 +321,59 @@ def check_memory(plan: Plan, sensor: Sensor, workers: int) -> None:
                         f"sensor.cells or --workers")
 
 
-class WorkerFailed(RuntimeError):
-    """A worker process raised, or died; the message is one line."""
+#: the executors of ``--executor`` (microsim.executors)
+EXECUTORS = {"local": executors.local, "dask": executors.dask}
 
 
-def _worker(connection, parent: int, plan: Plan, units) -> None:
-    """A worker process: dies with its parent, leaves SIGINT to it (and keeps a signal ignored as
-    its parent found it, as under nohup), sends (unit, tally, info) for each unit, then ("done",),
-    or ("error", one line) on its own pipe."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    for signum in (signal.SIGTERM, signal.SIGHUP):
-        if signal.getsignal(signum) is not signal.SIG_IGN:
-            signal.signal(signum, signal.SIG_DFL)
-    try:
-        prctl = ctypes.CDLL(None, use_errno=True).prctl
-        prctl.argtypes = [ctypes.c_int, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong]
-        prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    except (OSError, AttributeError):  # not Linux: the parent still kills its workers on the way out
-        pass
-    if os.getppid() != parent:  # the parent died before the request
-        os._exit(1)
-    try:
-        trace_units(plan, units, lambda unit, tally, info: connection.send((unit, tally, info)))
-        connection.send(("done",))
-    except Exception as err:  # noqa: BLE001 - sent as text: an exception need not pickle
-        connection.send(("error", f"{type(err).__name__}: {' '.join(str(err).split())}"))
-
-
-def split(units: list, parts: int) -> list[list]:
-    """Contiguous blocks of nearly equal size."""
-    edges = np.linspace(0, len(units), parts + 1).round().astype(int)
-    return [units[a:b] for a, b in zip(edges[:-1], edges[1:]) if b > a]
-
-
-def run(config, workers: int = 1, threads: int = 1, progress=None) -> Result:
-    """Trace a validated config of one albedo on ``workers`` processes of ``threads`` threads
-    each; ``progress(unit, paths)`` is called as units complete. Raises PlanError (one line), and
-    WorkerFailed if a worker raises or dies. A config of several albedos: :func:`run_albedos`."""
+def run(config, workers: int = 1, threads: int = 1, progress=None, **options) -> Result:
+    """Trace a validated config of one albedo (see :func:`run_albedos`). A config of several
+    albedos: :func:`run_albedos`."""
     albedos = albedos_of(config)
     if albedos:
         raise PlanError(f"material.albedo = {list(albedos)}: several albedos make several tables (runner.run_albedos)")
-    return run_albedos(config, workers, threads, progress)[0]
+    return run_albedos(config, workers, threads, progress, **options)[0]
 
 
-def run_albedos(config, workers: int = 1, threads: int = 1, progress=None) -> list[Result]:
-    """:func:`run` for a config of one albedo or several (CONVENTIONS 4): one Result per albedo,
-    in the order of ``material.albedo``, from one set of paths traced at the largest."""
+def run_albedos(config, workers: int = 1, threads: int = 1, progress=None, executor: str = "local",
+                scheduler: str | None = None, store=None) -> list[Result]:
+    """Trace a validated config of one albedo or several (CONVENTIONS 4): one Result per albedo,
+    in the order of ``material.albedo``, from one set of paths traced at the largest.
+
+    ``executor`` ("local" or "dask") traces on ``workers`` processes of ``threads`` threads each
+    (``scheduler``: the address of a Dask cluster's scheduler). ``store`` (a
+    :class:`~microsim.unit_store.UnitStore`): its saved units are taken as they are, only the
+    others are traced, and each new one is saved as it ends. ``progress(unit, paths, resumed)``
+    is called for every unit, saved ones first. Raises PlanError (one line), and
+    executors.WorkerFailed if a worker raises or dies."""
     plan = Plan.from_config(config, threads, workers)
     sensor = plan.build_sensor()
-    check_memory(plan, sensor, workers)
+    if scheduler is None:  # on this machine (a cluster's workers are elsewhere)
+        check_memory(plan, sensor, workers, spawned=executor == "dask")
     reducer = _Reducer(plan, sensor)
     start = time.perf_counter()
+    saved = set(store.saved_units()) if store is not None else set()
+    if progress is not None:
+        for unit in sorted(saved):
+            progress(unit, plan.paths_per_realization, True)
+
+    def reduce_saved():  # saved units are read when the sum reaches them: memory holds none ahead
+        while not reducer.done and reducer.units[reducer.next] in saved:
+            unit = reducer.units[reducer.next]
+            reducer.add(unit, *store.load(unit))
 
     def collect(unit, tally, info):
+        if store is not None:
+            store.save(unit, tally, info)
         reducer.add(unit, tally, info)
+        reduce_saved()
         if progress is not None:
-            progress(unit, tally.paths)
+            progress(unit, tally.paths, False)
 
-    blocks = split(plan.units, max(1, workers))
-    if len(blocks) <= 1:
-        trace_units(plan, plan.units, collect)
-    else:
-        plan.tracer_class.compile(sensor, **plan.tracer_options)
-        _trace_on_workers(plan, blocks, collect)
+    reduce_saved()
+    missing = [unit for unit in plan.units if unit not in saved]
+    if missing:
+        EXECUTORS[executor](plan, missing, collect, workers, scheduler)
     for result in reducer.results:
         result.wall_time = time.perf_counter() - start
+        result.units_resumed, result.units_traced = len(plan.units) - len(missing), len(missing)
     return reducer.results
-
-
-def _trace_on_workers(plan: Plan, blocks, collect) -> None:
-    """One forked worker per block, each with a pipe of its own (a worker killed mid-message
-    cannot block the others, and its end of file shows at once). Every worker is killed if this
-    returns any other way than with every worker done."""
-    context = multiprocessing.get_context("fork")
-    processes, readers = [], {}
-    try:
-        for block in blocks:
-            reader, writer = context.Pipe(duplex=False)
-            process = context.Process(target=_worker, args=(writer, os.getpid(), plan, block), daemon=True)
-            processes.append(process)
-            process.start()
-            writer.close()  # only the worker writes: its death is an end of file here
-            readers[reader] = process
-        while readers:
-            for reader in multiprocessing.connection.wait(list(readers)):
-                process = readers[reader]
-                try:
-                    message = reader.recv()
-                except EOFError:
-                    process.join(timeout=5)
-                    raise WorkerFailed(f"a worker process died (exit code {process.exitcode})") from None
-                if message[0] == "done":
-                    del readers[reader]
-                elif message[0] == "error":
-                    raise WorkerFailed(f"a worker failed: {message[1]}")
-                else:
-                    collect(*message)
-    finally:
-        for process in processes:
-            if process.is_alive():
-                process.kill()
-        for process in processes:
-            process.join(timeout=5)
-        for reader in readers:
-            reader.close()

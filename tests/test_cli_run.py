@@ -239,11 +239,11 @@ def _exit_quietly(*args):
 def test_a_failing_worker_ends_the_run_in_one_line(failure, line, tmp_path, capsys, monkeypatch):
     """A worker whose exception does not pickle, or that exits without its units, must not leave
     the main process waiting (it did, for ever)."""
-    from microsim import runner
+    from microsim import executors
 
     config = tmp_path / "small.toml"
     config.write_text(SPHERES.replace("paths = 20_000", "paths = 400"))
-    monkeypatch.setattr(runner, "trace_units", failure)  # the workers are forked from this process
+    monkeypatch.setattr(executors, "trace_units", failure)  # the workers are forked from this process
     assert main(["run", str(config), "--out", str(tmp_path / "t.h5"), "--workers", "2"]) == 1
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and err[0].startswith(line)

@@ -1,4 +1,4 @@
-"""Stopping a run: a signal to the main process alone stops every worker, writes nothing, says
+"""Stopping a run: a signal to the main process alone stops every worker, writes no table, says
 so in one line and dies of the signal (as a shell expects); workers die with their parent even
 when it is killed by SIGKILL; a signal ignored at start (nohup) stays ignored (issue 9, defect
 1). Real processes: the run is started with the CLI, signalled once it has installed its
@@ -84,7 +84,12 @@ def test_a_signal_to_the_main_process_stops_every_worker(tmp_path, name):
         for pid in [process.pid, *workers]:  # leave nothing running, whatever failed
             with contextlib.suppress(OSError):
                 os.kill(pid, signal.SIGKILL)
-    assert not out.exists() and list(tmp_path.iterdir()) == [], "something was written"
+    assert not out.exists()
+    # no unit of 10**9 / 32 paths ends in a second: nothing is kept but, after SIGKILL, the empty
+    # unit store that no clean-up could remove (a later run takes it over: test_resume)
+    left = [p.name for p in tmp_path.iterdir()]
+    assert left == ([] if signum != signal.SIGKILL else ["stopped.h5.partial"]), "something was written"
+    assert [p.name for p in tmp_path.glob("*.partial/*.npz")] == []
     assert status == -signum  # died of it: a shell reports 128 + signum
     if signum != signal.SIGKILL:
         assert stderr.splitlines() == [f"microsim: error: stopped by {name}; no table written"]

@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 import geometry
-from microsim import config, models, runner
+from microsim import config, executors, models, runner
 from microsim.compare import cell_averages
 from microsim.fresnel import fresnel_array
 from microsim.integrators.records import SEGMENTS
@@ -296,7 +296,7 @@ def test_orders_1_and_2_give_f2_with_their_own_error_and_compare_reads_them(simu
     # the error of each realization's f2, recomputed from the units' own tallies
     plan = runner.Plan.from_config(config.validate(settings))
     per_unit = {0: [], 1: []}
-    runner.trace_units(plan, plan.units, lambda unit, tally, info: per_unit[unit[1]].append(
+    executors.trace_units(plan, plan.units, lambda unit, tally, info: per_unit[unit[1]].append(
         (tally.exit_weight[0] + tally.exit_weight[1]) / tally.paths / table.projected_solid_angle))
     for i, estimates in per_unit.items():
         spread = np.std(estimates, axis=0, ddof=1) / math.sqrt(len(estimates))

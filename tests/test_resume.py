@@ -1,0 +1,252 @@
+"""Resumable runs (issue 13, deliverables 2 and 6): finished units are kept in <table>.partial as
+they end; a run killed by SIGKILL, or stopped by SIGTERM, and then resumed writes a table bit-
+identical to an uninterrupted run, tracing only the units that were missing (counted); a
+resume of another config is refused in one line; kept units are never discarded unasked."""
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from microsim import config as config_module
+from microsim import runner, unit_store
+from microsim.cli import main
+from test_cli_run import SPHERES
+from test_sweep import same_table
+
+#: test_cli_run's small spheres, with units long enough to be stopped between
+RUN = SPHERES.replace('name = "small"', 'name = "resumable"').replace("paths = 20_000", "paths = 2_560_000") \
+    .replace("realizations = 4", "realizations = 16")
+assert "paths = 2_560_000" in RUN and "realizations = 16" in RUN
+UNITS = 32  # 16 realizations x 2 incidences
+RESUMED = re.compile(r"(\d+) of (\d+) units resumed, (\d+) traced")
+
+
+def saved(out: Path) -> int:
+    """Finished units in the store of the run writing ``out``."""
+    return len(list(unit_store.store_path(out).glob("r*_i*.npz")))
+
+
+def start(config: Path, out: Path, *flags) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "microsim.cli", "run", str(config), "--out", str(out), *flags],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def wait_for_units(process, out: Path, count: int, seconds: float = 120) -> None:
+    end = time.monotonic() + seconds
+    while saved(out) < count:
+        assert process.poll() is None, process.communicate()
+        assert time.monotonic() < end, "the run kept no unit"
+        time.sleep(0.01)
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory):
+    """The table of the run traced at once (on 2 workers: bit-identical to 1, test_cli_run)."""
+    folder = tmp_path_factory.mktemp("whole")
+    config = folder / "run.toml"
+    config.write_text(RUN)
+    out = folder / "whole.h5"
+    assert main(["run", str(config), "--out", str(out), "--workers", "2"]) == 0
+    assert not unit_store.store_path(out).exists(), "the units outlived the finished table"
+    return out
+
+
+def resume(config: Path, out: Path, capsys, *flags) -> tuple[int, int]:
+    """Resume the run into ``out``; (units resumed, units traced) as the run line reports them."""
+    before = saved(out)
+    assert 0 < before < UNITS
+    capsys.readouterr()
+    assert main(["run", str(config), "--out", str(out), "--resume", *flags]) == 0
+    resumed, total, traced = map(int, RESUMED.search(capsys.readouterr().out).groups())
+    assert (resumed, total, traced) == (before, UNITS, UNITS - before)
+    assert not unit_store.store_path(out).exists()
+    return resumed, traced
+
+
+def test_a_run_killed_at_half_its_units_resumes_bit_identical(tmp_path, uninterrupted, capsys):
+    config = tmp_path / "run.toml"
+    config.write_text(RUN)
+    out = tmp_path / "killed.h5"
+    process = start(config, out, "--workers", "2")
+    try:
+        wait_for_units(process, out, UNITS // 2)
+        process.send_signal(signal.SIGKILL)
+        assert process.wait(timeout=10) == -signal.SIGKILL
+    finally:
+        process.kill()
+    assert not out.exists()
+    time.sleep(0.5)  # the workers die with their parent (PR_SET_PDEATHSIG): nothing more is saved
+    resumed, traced = resume(config, out, capsys)
+    assert UNITS // 2 <= resumed < UNITS and resumed + traced == UNITS
+    assert same_table(out, uninterrupted)
+
+
+def test_a_run_stopped_by_sigterm_keeps_its_units_and_resumes_bit_identical(tmp_path, uninterrupted, capsys):
+    config = tmp_path / "run.toml"
+    config.write_text(RUN)
+    out = tmp_path / "stopped.h5"
+    process = start(config, out)
+    try:
+        wait_for_units(process, out, 5)
+        process.send_signal(signal.SIGTERM)
+        status = process.wait(timeout=15)
+        stderr = process.communicate(timeout=10)[1]
+    finally:
+        process.kill()
+    kept = saved(out)
+    assert status == -signal.SIGTERM and not out.exists()
+    assert stderr.splitlines() == [f"microsim: error: stopped by SIGTERM; no table written; {kept} of {UNITS} units "
+                                   f"kept in {unit_store.store_path(out)} (rerun with --resume to finish)"]
+    resume(config, out, capsys, "--threads", "2")
+    assert same_table(out, uninterrupted)
+
+
+def test_units_are_kept_only_for_the_same_run(tmp_path, capsys):
+    """Changed config: refused in one line, units kept. No --resume: refused, units kept.
+    --force: discarded and traced afresh."""
+    config = tmp_path / "run.toml"
+    config.write_text(RUN.replace("paths = 2_560_000", "paths = 3200"))
+    out = tmp_path / "t.h5"
+    plan = runner.Plan.from_config(config_module.load(config))
+    store = unit_store.UnitStore.open(unit_store.store_path(out), plan, resume=False)
+    runner.run(config_module.load(config), store=store)  # every unit kept, no table
+    store.release()  # as a run that died
+    files = sorted(p.name for p in store.directory.iterdir())
+    assert len(files) == UNITS + 1
+
+    capsys.readouterr()
+    assert main(["run", str(config), "--out", str(out), "--resume", "--paths", "6400"]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        f"microsim: error: --resume: {store.directory} holds units of another run (run.paths: 3200 -> 6400); rerun "
+        "with the config they came from, or pass --force to discard them"]
+    assert main(["run", str(config), "--out", str(out)]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        f"microsim: error: {store.directory} holds {UNITS} finished units of an interrupted run: pass --resume to "
+        "continue it, or --force to discard them"]
+    assert sorted(p.name for p in store.directory.iterdir()) == files and not out.exists()
+
+    assert main(["run", str(config), "--out", str(out), "--resume"]) == 0
+    assert RESUMED.search(capsys.readouterr().out).groups() == (str(UNITS), str(UNITS), "0")
+    fresh = tmp_path / "fresh.h5"
+    assert main(["run", str(config), "--out", str(fresh)]) == 0
+    assert same_table(out, fresh)
+
+    store = unit_store.UnitStore.open(unit_store.store_path(out), plan, resume=False)
+    runner.run(config_module.load(config), store=store)
+    store.release()
+    assert main(["run", str(config), "--out", str(out), "--force"]) == 0
+    assert "resumed" not in capsys.readouterr().out and not store.directory.exists()
+
+
+def test_a_damaged_unit_file_is_never_taken(tmp_path):
+    """Units are written under a temporary name and renamed: a half-written file is not a unit."""
+    path = tmp_path / "run.toml"
+    path.write_text(RUN)
+    plan = runner.Plan.from_config(config_module.load(path))
+    store = unit_store.UnitStore.open(tmp_path / "units", plan, resume=False)
+    (store.directory / ".r0_i0.npz.tmp").write_bytes(b"half a unit")
+    assert store.saved_units() == []
+
+
+def test_progress_counts_resumed_units_as_done_and_times_only_the_traced(tmp_path, monkeypatch):
+    from types import SimpleNamespace
+
+    from microsim import cli
+
+    path = tmp_path / "run.toml"
+    path.write_text(RUN)
+    plan = runner.Plan.from_config(config_module.load(path))
+    clock = [100.0]
+    monkeypatch.setattr(cli, "time", SimpleNamespace(monotonic=lambda: clock[0]))
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)
+    progress = cli._progress(plan)
+    advance = progress.__enter__()
+    try:
+        for unit in plan.units[:3]:
+            advance(unit, plan.paths_per_realization, True)
+        assert progress.bar.tasks[0].fields["status"].endswith("starting")  # no rate from resumed units
+        clock[0] += 2.0  # one unit traced in 2 s: 28 left
+        advance(plan.units[3], plan.paths_per_realization, False)
+        status = progress.bar.tasks[0].fields["status"]
+    finally:
+        progress.__exit__(None, None, None)
+    assert status == (f"4/{UNITS} units, {4 * plan.paths_per_realization // 2:,} of {plan.paths:,} paths per "
+                      f"incidence, {2.0 * (UNITS - 4):.0f} s left")
+
+
+def kept_units(config: Path, out: Path) -> list[str]:
+    """Trace every unit of ``config`` into the store of ``out`` and stop there, as a run killed
+    just before writing its table; the store's file names."""
+    plan = runner.Plan.from_config(config_module.load(config))
+    store = unit_store.UnitStore.open(unit_store.store_path(out), plan, resume=False)
+    runner.run(config_module.load(config), store=store)
+    store.release()
+    return sorted(p.name for p in store.directory.iterdir())
+
+
+def small_run(tmp_path) -> Path:
+    config = tmp_path / "run.toml"
+    config.write_text(RUN.replace("paths = 2_560_000", "paths = 3200"))
+    return config
+
+
+def test_a_refused_resume_keeps_every_unit(tmp_path, capsys, monkeypatch):
+    """Refusals (memory, a store in use by another run) come before the store is touched."""
+    config, out = small_run(tmp_path), tmp_path / "t.h5"
+    files = kept_units(config, out)
+    monkeypatch.setattr(runner, "available_memory", lambda: 2**20)
+    capsys.readouterr()
+    assert main(["run", str(config), "--out", str(out), "--resume"]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "GiB are free" in err[0]
+    monkeypatch.undo()
+    plan = runner.Plan.from_config(config_module.load(config))
+    holder = unit_store.UnitStore.open(unit_store.store_path(out), plan, resume=True)  # another run
+    try:
+        assert main(["run", str(config), "--out", str(out), "--resume"]) == 2
+        assert capsys.readouterr().err.splitlines() == [
+            f"microsim: error: {holder.directory} is in use by another run writing the same table; wait for it to "
+            "end, or give this one another --out"]
+    finally:
+        holder.release()
+    assert sorted(p.name for p in unit_store.store_path(out).iterdir()) == files and not out.exists()
+
+
+def test_damaged_unit_files_are_traced_again(tmp_path, capsys):
+    """A unit file cut short (a machine that crashed before the disk had it) is dropped and its
+    unit traced again; the table is still the uninterrupted one."""
+    config, out = small_run(tmp_path), tmp_path / "t.h5"
+    files = [name for name in kept_units(config, out) if name.endswith(".npz")]
+    store = unit_store.store_path(out)
+    (store / files[0]).write_bytes(b"")
+    (store / files[1]).write_bytes((store / files[1]).read_bytes()[:500])
+    (store / f".{files[2]}.tmp").write_bytes(b"half a unit")
+    capsys.readouterr()
+    assert main(["run", str(config), "--out", str(out), "--resume"]) == 0
+    assert RESUMED.search(capsys.readouterr().out).groups() == (str(UNITS - 2), str(UNITS), "2")
+    fresh = tmp_path / "fresh.h5"
+    assert main(["run", str(config), "--out", str(fresh)]) == 0
+    assert same_table(out, fresh) and not store.exists()
+
+
+def test_a_signal_while_the_tables_are_written_waits_for_them():
+    """Once tracing is over a signal no longer interrupts: the tables are written and the store
+    cleared first, then the run stops saying so (the message must not claim no table)."""
+    from microsim import cli
+
+    events = []
+    with pytest.raises(cli.Stopped) as stopped:
+        with cli._stop_on_signals() as hold:
+            with hold():
+                os.kill(os.getpid(), signal.SIGTERM)
+                time.sleep(0.05)  # the handler runs here, and must not raise
+                events.append("tables written")
+    assert events == ["tables written"]
+    assert stopped.value.message == "stopped by SIGTERM once its tables were written"
+    assert stopped.value.exit_code == 128 + signal.SIGTERM
