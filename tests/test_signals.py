@@ -54,8 +54,17 @@ def handles_sigterm(pid: int) -> bool:
 def start_run(tmp_path, *options, ignore_hup=False):
     out = tmp_path / "stopped.h5"
     command = [sys.executable, "-m", "microsim.cli", "run", str(RUN), "--paths", str(10**9), "--out", str(out), *options]
-    ignore = (lambda: signal.signal(signal.SIGHUP, signal.SIG_IGN)) if ignore_hup else None  # as nohup does
-    return subprocess.Popen(command, stderr=subprocess.PIPE, text=True, cwd=tmp_path, preexec_fn=ignore), out
+
+    def dispositions():
+        """The run starts with default dispositions, whatever pytest inherited (a suite started
+        by nohup or as a background job ignores SIGHUP, SIGINT and SIGQUIT); SIGHUP ignored as
+        nohup does if asked."""
+        for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT):
+            signal.signal(signum, signal.SIG_DFL)
+        if ignore_hup:
+            signal.signal(signal.SIGHUP, signal.SIG_IGN)
+
+    return subprocess.Popen(command, stderr=subprocess.PIPE, text=True, cwd=tmp_path, preexec_fn=dispositions), out
 
 
 def wait_until(condition, seconds: float) -> bool:
