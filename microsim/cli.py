@@ -142,7 +142,7 @@ def cli():
                                                       "(with --executor dask)")
 def run(config_path, out, workers, threads, backend, paths, seed, force, resume, executor, scheduler):
     """Trace CONFIG.toml and write its HDF5 table."""
-    from . import runner, tables, unit_store
+    from . import runner, unit_store
 
     overrides = {}
     if paths is not None:
