@@ -330,7 +330,7 @@ def _run_sweep(points, out_dir: Path, options: Options) -> None:
     and ``index.csv`` (rewritten as each point ends: values, table, status, albedo per incidence).
     With --resume, a point whose table is there (made from the same config) is kept as it is,
     and the point that was interrupted resumes from its units."""
-    from . import runner, tables, unit_store
+    from . import runner, unit_store
 
     if out_dir.exists() and not out_dir.is_dir():
         raise BadInput(f"--out: {out_dir} is a file; a sweep writes its tables into a directory")
@@ -345,8 +345,8 @@ def _run_sweep(points, out_dir: Path, options: Options) -> None:
         path = out_dir / f"{point.name}.h5"
         try:
             plan = runner.Plan.from_config(point.config, options.threads, options.workers)
-            kept.append(options.resume and _finished_point(path, point))
-            if not kept[-1]:
+            kept.append(_finished_table(path, point) if options.resume else None)
+            if kept[-1] is None:
                 if options.scheduler is None:
                     runner.check_memory(plan, plan.build_sensor(), options.workers, spawned=options.executor == "dask")
                 unit_store.UnitStore.check(unit_store.store_path(path), plan, options.resume, options.force)
@@ -357,13 +357,12 @@ def _run_sweep(points, out_dir: Path, options: Options) -> None:
     keys = list(points[0].values)
     rows = [{"point": p.name, **{k: p.values[k] for k in keys}, "table": f"{p.name}.h5", "status": "pending"}
             for p in points]
-    for row, point, plan, done in zip(rows, points, plans, kept):
-        if done:
-            table = tables.load(out_dir / row["table"])
+    for row, plan, table in zip(rows, plans, kept):
+        if table is not None:
             _index_albedos(row, plan, table.arrays["albedo"])
     _write_index(out_dir, rows)
-    for row, point, plan, done in zip(rows, points, plans, kept):
-        if done:
+    for row, point, plan, table in zip(rows, points, plans, kept):
+        if table is not None:
             unit_store.UnitStore(unit_store.store_path(out_dir / row["table"]), {}).clear()  # outlived its table
             click.echo(f"{point.name}: kept (its table was finished)")
             continue
@@ -376,21 +375,21 @@ def _run_sweep(points, out_dir: Path, options: Options) -> None:
     click.echo(f"{len(points)} tables and {sweep.INDEX} written to {out_dir}")
 
 
-def _finished_point(path: Path, point) -> bool:
-    """Whether a sweep point's table is there and was made from the point's config; BadInput if
-    a table of another config holds its name."""
+def _finished_table(path: Path, point):
+    """A sweep point's table if it is there and was made from the point's config, None if it is
+    not there; BadInput if a table of another config holds its name."""
     from . import tables
 
     if not path.exists():
-        return False
+        return None
     try:
-        same = tables.load(path).attrs["config_toml"] == tables.config_to_toml(point.config)
-    except (OSError, KeyError, tables.TableError):
-        same = False
-    if not same:
+        table = tables.load(path)
+    except (OSError, tables.TableError):
+        table = None
+    if table is None or table.attrs.get("config_toml") != tables.config_to_toml(point.config):
         raise BadInput(f"--resume: {path} is not the table of sweep point {point.name} (another config, or "
                        "damaged); pass --force to overwrite it")
-    return True
+    return table
 
 
 def _index_albedos(row: dict, plan, albedos) -> None:
@@ -525,12 +524,13 @@ class _progress:
         self.bar.start()
         units = len(plan.units)
         task = self.bar.add_task("trace", total=units, status=f"0/{units} units")
-        resumed = []
+        counts = {"done": 0, "traced": 0}
 
         def advance(unit, paths, from_store):
             self.bar.advance(task, 1)
-            resumed.append(from_store)
-            done, traced = len(resumed), len(resumed) - sum(resumed)
+            counts["done"] += 1
+            counts["traced"] += not from_store
+            done, traced = counts["done"], counts["traced"]
             left = f"{(time.monotonic() - start) * (units - done) / traced:.0f} s left" if traced else "starting"
             per_incidence = done * plan.paths_per_realization // plan.n_incidences
             self.bar.update(task, status=f"{done}/{units} units, {per_incidence:,} of {plan.paths:,} paths per "
