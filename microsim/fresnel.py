@@ -43,11 +43,11 @@ def fresnel_conductor(cos_i, eta, k):
     a = math.sqrt(max(0.5 * (a2b2 + t0), 0.0))
     t1 = a2b2 + c2
     t2 = 2.0 * c * a
-    rs = (t1 - t2) / (t1 + t2)
     t3 = c2 * a2b2 + s2 * s2
     t4 = t2 * s2
-    rp = rs * (t3 - t4) / (t3 + t4) if t3 + t4 > 0.0 else 1.0
-    return 0.5 * (rs + rp)
+    # (rs + rp) / 2 with rs = (t1 - t2) / (t1 + t2) and rp = rs (t3 - t4) / (t3 + t4), in one
+    # division; t3 > 0 (c = 0 gives s2 = 1), so rp needs no guard
+    return (t1 - t2) * t3 / ((t1 + t2) * (t3 + t4))
 
 
 @numba.njit(cache=True, error_model="numpy")

@@ -9,11 +9,13 @@ backscatter half plane of an incidence at phi_i = 0).
 
 Lookup: u = (1 - z) N lies in [C_{k-1}, C_k) for the ring k of direction (x, y, z), so
 ``ring_of[floor(u)]`` gives the ring in O(1). Within the ring, a polynomial azimuth (error
-below 1e-5 rad, far below a cell's width) guesses the cell, and the side of the cell's two phi
-edges that (x, y) lies on (the sign of a cross product with the edge's unit vector) settles it
-exactly: no atan2, which took 8 ns of the 45 ns a segment spends outside Embree in the direct
-backend (about 70 ns per exit, phi = 0.3). It bins as floor(atan2(y, x) n_k / 2 pi + 1/2)
-did, except within rounding (~1e-16 rad) of an edge.
+below 2.04e-4 rad, at most a tenth of a cell's width even at 10^6 cells) guesses the cell. Where
+the guess lies farther from both of the cell's edges than twice that error, it is the cell;
+otherwise the side of the cell's two phi edges that (x, y) lies on (the sign of a cross product
+with the edge's unit vector) settles it exactly, one step at most. No atan2, no search loop: it
+bins as floor(atan2(y, x) n_k / 2 pi + 1/2) did, except within rounding (~1e-16 rad) of an
+edge. Measured per exit (2 M random directions, 3240 cells): 39 ns with a search loop, 13 ns
+without, and in the tracer the shortcut spares most exits the two table loads of the edge test.
 
 Retro rings (optional, ``[sensor] retro_rings``): a second, finer tally of the exits near the
 retro direction wi, for the opposition peak. Ring b holds the directions whose chord to wi,
@@ -53,7 +55,7 @@ class Sensor(NamedTuple):
     def from_ring_counts(cls, ring_counts) -> "Sensor":
         ring_counts = np.asarray(ring_counts, dtype=np.int64)
         ring_start = np.concatenate([[0], np.cumsum(ring_counts)]).astype(np.int64)
-        ring_of = np.repeat(np.arange(len(ring_counts), dtype=np.int64), ring_counts)
+        ring_of = np.repeat(np.arange(len(ring_counts), dtype=np.int32), ring_counts)
         j = np.arange(ring_start[-1]) - ring_start[ring_of]
         edge = (j - 0.5) * (2.0 * np.pi / ring_counts[ring_of])
         return cls(ring_counts, ring_start, ring_of, np.cos(edge), np.sin(edge))
@@ -240,6 +242,11 @@ class Sensor(NamedTuple):
         return np.sum(values * weight, axis=1)
 
 
+_INV_TWO_PI = 0.5 / math.pi
+#: the largest error of :func:`azimuth`, 2.04e-4 rad (at 45 deg), doubled, as a fraction of a turn
+_GUESS_MARGIN = 2.0 * 2.04e-4 * _INV_TWO_PI
+
+
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def cell_index(d, sensor):
     """Cell of the direction d = (x, y, z), z > 0: O(1) (see module docstring)."""
@@ -255,18 +262,23 @@ def cell_index(d, sensor):
     first = sensor.ring_start[k]
     if count == 1:
         return first
-    j = int(math.floor(azimuth(x, y) * count / (2.0 * math.pi) + 0.5))
-    j = j % count
-    for _ in range(count):  # one step at most: the guess is within 1e-5 rad
-        if sensor.edge_x[first + j] * y - sensor.edge_y[first + j] * x < 0.0:
-            j = j - 1 if j > 0 else count - 1  # d is clockwise of the cell's lower edge
-            continue
-        upper = j + 1 if j + 1 < count else 0
-        if sensor.edge_x[first + upper] * y - sensor.edge_y[first + upper] * x >= 0.0:
-            j = upper  # d is on or past the upper edge
-            continue
-        break
-    return first + j
+    guess = azimuth(x, y) * (count * _INV_TWO_PI) + 0.5
+    j = int(math.floor(guess))
+    inside = guess - j  # where d lies in the guessed cell, 0 .. 1 from edge to edge
+    if j >= count:
+        j -= count
+    if j < 0:
+        j += count
+    c = first + j
+    margin = count * _GUESS_MARGIN
+    if margin < inside < 1.0 - margin:
+        return c  # farther from both edges than the azimuth can be off: no edge test needed
+    if sensor.edge_x[c] * y - sensor.edge_y[c] * x < 0.0:
+        return c - 1 if j > 0 else first + count - 1
+    upper = c + 1 if j + 1 < count else first
+    if sensor.edge_x[upper] * y - sensor.edge_y[upper] * x >= 0.0:
+        return upper
+    return c
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
@@ -282,7 +294,8 @@ def retro_ring(d, sensor):
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def azimuth(x, y):
-    """atan2(y, x) within 1e-5 rad (a cubic minimax fit of atan on [0, 1], octant folded)."""
+    """atan2(y, x) within 2.04e-4 rad (a cubic fit of atan on [0, 1], octant folded; the error
+    peaks at 45 deg)."""
     ax, ay = abs(x), abs(y)
     big, small = max(ax, ay), min(ax, ay)
     if big == 0.0:

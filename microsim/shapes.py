@@ -11,8 +11,8 @@ Kinds and parameters:
   projected (the mesh's circumscribed radius, so that a projected point is never inside the
   sphere's own convex mesh).
 - ``PLANE``: a point (3) and the unit normal (3). Base planes and V-groove facets.
-- ``ELLIPSOID``: centre (3), semi-axes (3) along x, y, z, projection scale (>= 1, the mesh's
-  circumscribed scale). Micrograins are the upper halves of such ellipsoids.
+- ``ELLIPSOID``: centre (3), inverse semi-axes (3) along x, y, z, projection scale (>= 1, the
+  mesh's circumscribed scale). Micrograins are the upper halves of such ellipsoids.
 """
 
 from __future__ import annotations
@@ -85,7 +85,7 @@ class Shapes:
         n = len(centres)
         params = np.zeros((n, N_PARAMS))
         params[:, 0:3] = centres
-        params[:, 3:6] = semi_axes
+        params[:, 3:6] = 1.0 / np.asarray(semi_axes, np.float64)
         params[:, 6] = project_scale
         return Shapes(np.full(n, ELLIPSOID, np.int32), params, np.zeros(n, np.int32), np.min(semi_axes, axis=1))
 
@@ -104,12 +104,14 @@ def surface_point(code, prm, h):
         nx, ny, nz = prm[3], prm[4], prm[5]
         d = (x - prm[0]) * nx + (y - prm[1]) * ny + (z - prm[2]) * nz
         return (x - d * nx, y - d * ny, z - d * nz), (nx, ny, nz)
-    if code == ELLIPSOID:  # radial projection in the frame where the ellipsoid is the unit sphere
-        ax, ay, az = prm[3], prm[4], prm[5]
-        ux, uy, uz = (x - prm[0]) / ax, (y - prm[1]) / ay, (z - prm[2]) / az
+    if code == ELLIPSOID:
+        # radial projection in the frame where the ellipsoid is the unit sphere: u = (h - c) / a
+        # is moved to the radius s; the point is c + s (h - c), the normal that of the gradient
+        # u / a, whose direction needs no s (two independent square roots, no division by a)
+        vx, vy, vz = x - prm[0], y - prm[1], z - prm[2]
+        ux, uy, uz = vx * prm[3], vy * prm[4], vz * prm[5]
+        gx, gy, gz = ux * prm[3], uy * prm[4], uz * prm[5]
         s = prm[6] / math.sqrt(ux * ux + uy * uy + uz * uz)
-        ux, uy, uz = ux * s, uy * s, uz * s
-        gx, gy, gz = ux / ax, uy / ay, uz / az
         inv = 1.0 / math.sqrt(gx * gx + gy * gy + gz * gz)
-        return (prm[0] + ux * ax, prm[1] + uy * ay, prm[2] + uz * az), (gx * inv, gy * inv, gz * inv)
+        return (prm[0] + s * vx, prm[1] + s * vy, prm[2] + s * vz), (gx * inv, gy * inv, gz * inv)
     raise ValueError("surface_point: unknown shape kind code")

@@ -132,7 +132,7 @@ class Field:
         self.tile = tile = scene.tile
         self.beta = np.array([beta_x, beta_y])
         grains = scene.shapes.params[scene.shapes.code == shapes.ELLIPSOID]
-        np.testing.assert_allclose(grains[:, 3:6], np.tile([1.0 / beta_x, 1.0 / beta_y, 1.0], (len(grains), 1)))
+        np.testing.assert_allclose(grains[:, 3:6], np.tile([beta_x, beta_y, 1.0], (len(grains), 1)))  # inverse semi-axes
         centres = grains[:, 0:3]
         own = np.all((centres[:, :2] >= 0.0) & (centres[:, :2] < tile), axis=1)  # not periodic images
         self.centres = centres[own]

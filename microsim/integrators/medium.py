@@ -22,7 +22,7 @@ from ..models.phase import sample_phase_exact
 from ..rng import uniform
 from ..sampling import from_local
 from .events import add_interaction, begin_path, exit_top, survives_interaction, truncate
-from .fused import CHUNK_PATHS, SLOTS, chunk_tally, trace_in_waves, wave_rows, workspace
+from .fused import CHUNK_PATHS, chunk_tally, trace_in_waves, wave_rows, workspace
 from .records import SEGMENTS, SINGLE_ALBEDO, Beam
 
 #: codes of geometry.halfspace_medium.PHASES
@@ -61,7 +61,7 @@ def trace_chunks(first, start, stop, beam, medium, sensor, work):
         tally = chunk_tally(work, j, beam)
         chunk = first + j
         for number in range(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths)):
-            trace_path(work.paths, SLOTS * j, number, beam, medium, sensor, tally)
+            trace_path(work.paths, j, number, beam, medium, sensor, tally)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

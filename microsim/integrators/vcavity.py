@@ -43,7 +43,7 @@ from ..materials import scatter
 from ..models.distributions import sample_slope
 from ..rng import uniform
 from .events import add_interaction, begin_path, exit_top, survives_interaction, truncate
-from .fused import CHUNK_PATHS, SLOTS, chunk_tally, trace_in_waves, wave_rows, workspace
+from .fused import CHUNK_PATHS, chunk_tally, trace_in_waves, wave_rows, workspace
 from .records import SEGMENTS, SINGLE_ALBEDO, Beam
 
 #: facets of a groove, as :func:`meet_analytic` and :func:`meet_embree` name them; NONE: no facet
@@ -122,7 +122,7 @@ def trace_chunks(first, start, stop, beam, grooves, sensor, work, meet, handle):
         tally = chunk_tally(work, j, beam)
         chunk = first + j
         for number in range(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths)):
-            trace_path(work, SLOTS * j, number, beam, grooves, sensor, tally, meet, handle)
+            trace_path(work, j, number, beam, grooves, sensor, tally, meet, handle)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
