@@ -2,38 +2,37 @@
 
 The paths of a unit are cut into chunks of ``CHUNK_PATHS`` consecutive paths, and the chunks
 into waves of up to ``WAVE_CHUNKS_PER_THREAD`` per thread. Each chunk is traced to completion
-into a tally of its own, one path after the other and segment after segment (``rtcIntersect1``
-on an ``RTCRayHit`` record of its own, then the shared event kernels of :mod:`.surface`), with
-no Python between segments (:func:`trace_chunk`). ``threads`` Python threads share a wave, one
-numba call (:func:`trace_chunks`) each for a contiguous share of its chunks; the call releases
-the GIL, and all threads share one committed Embree scene. The chunk tallies are then summed in
-chunk order (:func:`add_chunks`). A path's random stream is keyed by its number, and a chunk's
-order of events depends on its paths alone, so a table depends neither on the number of threads
-nor on which thread traced which chunk: bit-identical for any thread count.
+into a tally of its own, segment after segment (``rtcIntersect1`` on an ``RTCRayHit`` record of
+its own, then the shared event kernels of :mod:`.surface`), with no Python between segments:
+two paths at a time (``SLOTS``), both queries then both events, so that the processor overlaps
+the two paths' work; a slot whose path ends takes the chunk's next path (:func:`trace_chunk`).
+``threads`` Python threads share a wave, one numba call (:func:`trace_chunks`) each for a
+contiguous share of its chunks (:func:`thread_shares`); the call releases the GIL, and all
+threads share one committed Embree scene. The chunk tallies are then summed in chunk order
+(:func:`add_chunks`). A path's random stream is keyed by its number, and a chunk's order of
+events depends on its paths alone, so a table depends neither on the number of threads nor on
+which thread traced which chunk: bit-identical for any thread count.
 
-Time outside Embree, measured on the micrograin scene of ``benchmarks/throughput.py`` (1 thread,
-the same rays replayed through rtcIntersect1 alone, processes of two versions alternated; own
-time per path, 2.23 segments a path, Embree's share about 225 ns a path):
+Time outside Embree per path (1 thread, the same rays replayed through rtcIntersect1 alone;
+processes of two versions alternated, 400 k paths, best of 7, medians of 3 processes):
 
-- 80 ns: two paths side by side (two inlined copies of the event kernels), 2048-path chunks in
-  waves of 8 a thread. A loop over K slots made it worse as K grew (91, 104, 115 ns for K = 2,
-  4, 8): the processor gained nothing from the second path, so one path at a time it is, and
-  the kernel compiles in a few seconds instead of 27.
-- 64 ns: plus the exit binning without its search loop (:func:`microsim.sensor.cell_index`),
-  the ellipsoid projection without divisions and the conductor's Fresnel in one division.
-- 52 ns: plus 16 384-path chunks in waves of 4 a thread. A chunk zeroes and fills a tally of
-  TALLY_ROWS x cells doubles (130 kB at 3240 cells); a fresh one every 2048 paths evicted the
-  sensor's tables and Embree's nodes from the cache, and every wave costs about 0.1 ms of
+- Micrograins (``benchmarks/throughput.py``'s scene, 2.23 segments a path, Embree about
+  225 ns a path): 83 ns with 2048-path chunks in waves of 8 a thread; 46 ns now. What it took:
+  the exit binning without its search loop and mostly without its edge test
+  (:func:`microsim.sensor.cell_index`), the ellipsoid projection without divisions, the
+  conductor's Fresnel in one division, and longer chunks: a chunk zeroes and fills a tally of
+  TALLY_ROWS x cells doubles (130 kB at 3240 cells), and a fresh one every 2048 paths evicted
+  the sensor's tables and Embree's nodes from the cache; every wave also costs about 0.1 ms of
   Python (the calls' typing of the bundles), so a wave should be long.
-- 49 ns: plus the binning's shortcut past the edge test (:func:`microsim.sensor.cell_index`).
-
-Chunks are 8192 paths, not 16 384: a unit's chunks are split between threads by paths
-(:func:`thread_shares`), and a unit of 50 000 paths made of three 16 384-path chunks cannot be
-split evenly between two threads (whole runs on two threads were 1.24 times one thread,
-against 1.42 with 8192, for the same single-thread speed within the noise).
-
-Spelling the side tests of :func:`.surface.prepare_segment` so as to divide once made it slower
-(+3 ns): LLVM's speculative divisions there shorten the path to the next query.
+- The two slots: on spheres (phi = 0.3, about 7 segments a path) one path at a time took
+  368 ns a path and two slots 299 ns (ratio to raw Embree 0.842 against 0.869); on the
+  micrograins one path at a time was a little faster, 42 against 46 ns (0.840 against 0.827).
+  Two slots stay; one slot compiles in about 10 s instead of 27. A loop over K slots, one copy
+  of the kernels, was slower than both, and the more so as K grew (K = 2, 4, 8).
+- Chunks are 8192 paths: 16 384 was as fast on one thread, but a unit of 50 000 paths made
+  of three such chunks cannot be split evenly between two threads.
+- Spelling the side tests of :func:`.surface.prepare_segment` so as to divide once made it
+  slower (+3 ns): LLVM's speculative divisions there shorten the path to the next query.
 
 Memory is one scene per process, a few hundred bytes per path row, and the tallies of one wave
 (WAVE_CHUNKS_PER_THREAD x threads x TALLY_ROWS x cells doubles).
@@ -63,20 +62,25 @@ CHUNK_PATHS = 8192
 #: chunks of a wave per thread, each thread tracing a contiguous share in one call; the wave's
 #: chunk tallies are then summed in chunk order
 WAVE_CHUNKS_PER_THREAD = 4
-#: one row per chunk of a wave: the path it is tracing, its segment and Embree query, and its
-#: tally; and the ray log (origin, direction, tfar of every query, in order; empty unless asked for)
+#: paths of a chunk traced side by side (:func:`trace_chunk`)
+SLOTS = 2
+
+#: SLOTS rows per chunk of a wave (the paths it is tracing, their segments and Embree queries)
+#: and one row per chunk (its tally); and the ray log (origin, direction, tfar of every query,
+#: in order; empty unless asked for)
 Workspace = namedtuple("Workspace", ["paths", "rays", "records", "exit_weight", "energy", "counts", "log",
                                      "logged"])
 
 
 def workspace(rows: int, width: int, log_rays: int = 0, albedos: int = 1) -> Workspace:
     """Tallies of ``width`` bins (sensor.tally_width) for ``rows`` chunks (of ``albedos`` albedos
-    each), and a path row (path, query) for each. Two query records at least: the views into a
-    single record are contiguous, which numba types apart (a second compile of every kernel)."""
-    records = embree.ray_hits(max(rows, 2))
-    rays = Rays(*embree.ray_views(records), np.zeros(len(records), np.int8))  # segments written into the queries
+    each), and SLOTS path rows (paths, queries) for each: two query records at least, as
+    the views into a single record would be contiguous, which numba types apart (a second
+    compile of every kernel)."""
+    records = embree.ray_hits(SLOTS * rows)
+    rays = Rays(*embree.ray_views(records), np.zeros(SLOTS * rows, np.int8))  # segments written into the queries
     axis = (albedos,) if albedos > 1 else ()  # one albedo: no albedo axis (records.Tally)
-    return Workspace(allocate_paths(rows), rays, records,
+    return Workspace(allocate_paths(SLOTS * rows), rays, records,
                      np.zeros((rows, *axis, TALLY_ROWS, width)), np.zeros((rows, *axis, len(ENERGY_NAMES))),
                      np.zeros((rows, len(COUNT_NAMES)), np.int64), np.zeros((log_rays, 7), np.float32),
                      np.zeros(1, np.int64))
@@ -161,7 +165,7 @@ def trace_chunks(first, start, stop, beam, scene, handle, sensor, work):
     row j, its paths in path row j (see :func:`trace_chunk`)."""
     for j in range(start, stop):
         chunk = first + j
-        trace_chunk(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths), j, beam, scene, handle,
+        trace_chunk(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths), SLOTS * j, beam, scene, handle,
                     sensor, work, chunk_tally(work, j, beam))
 
 
@@ -177,19 +181,46 @@ def chunk_tally(work, j, beam):
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def trace_chunk(begin, end, row, beam, scene, handle, sensor, work, tally):
-    """Paths begin .. end-1, one after the other in row ``row``, each segment by segment: Embree's
-    closest hit (:func:`query`), then the event there (:func:`.surface.follow`)."""
-    for number in range(begin, end):
+    """Paths begin .. end-1, two at a time in rows ``row`` and ``row + 1``: both queries, then both
+    events, so that the processor overlaps the two paths' event arithmetic (independent chains of
+    divisions, square roots and random numbers); a slot whose path ends takes the next path.
+    One body serves both slots and the last one alone: numba inlines the event kernels twice
+    (with a third copy for the last slot, the kernel took 56 s to compile)."""
+    a, b = row, row + 1
+    busy_a, busy_b, number = False, False, begin
+    if number < end:
+        start_path(work.paths, work.rays, a, number, beam, scene)
+        busy_a, number = True, number + 1
+    if number < end:
+        start_path(work.paths, work.rays, b, number, beam, scene)
+        busy_b, number = True, number + 1
+    while busy_a or busy_b:
+        if busy_a:
+            query(handle, work, a)
+        if busy_b:
+            query(handle, work, b)
+        tally.counts[SEGMENTS] += busy_a + busy_b
+        if busy_a:
+            busy_a, number = event(work, a, number, end, handle, beam, scene, sensor, tally)
+        if busy_b:
+            busy_b, number = event(work, b, number, end, handle, beam, scene, sensor, tally)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def event(work, row, number, end, handle, beam, scene, sensor, tally):
+    """The path in ``row`` met the hit Embree left in its record: follow it, and prepare its next
+    segment, or start path ``number`` in its row if it ended and paths are left. Returns (row
+    busy, next path number)."""
+    prim, t, normal = embree.hit_of(handle, work.records, row)
+    alive, o, d = follow(work.paths, work.rays, row, (prim, np.float64(t), normal), scene, sensor, beam.max_order,
+                         tally)
+    if alive:
+        prepare_segment(work.rays, row, o, d, scene)
+        return True, number
+    if number < end:
         start_path(work.paths, work.rays, row, number, beam, scene)
-        alive = True
-        while alive:
-            query(handle, work, row)
-            tally.counts[SEGMENTS] += 1
-            prim, t, normal = embree.hit_of(handle, work.records, row)
-            alive, o, d = follow(work.paths, work.rays, row, (prim, np.float64(t), normal), scene, sensor,
-                                 beam.max_order, tally)
-            if alive:
-                prepare_segment(work.rays, row, o, d, scene)
+        return True, number + 1
+    return False, number
 
 
 @numba.njit(cache=True, error_model="numpy", _nrt=False)
