@@ -17,6 +17,26 @@ def test_the_binding_finds_known_hits_on_a_triangle_and_a_sphere():
     assert np.allclose(normal[2] / np.linalg.norm(normal[2]), [1, 0, 0], atol=1e-6)  # the exit faces out
 
 
+def test_intersect_fills_the_hits_of_an_earlier_call_again():
+    """``out``: the same hits written into the arrays of an earlier call (a replay that times
+    Embree alone); arrays for another number of rays are refused."""
+    scene = embree.Scene(spheres=[[5.0, 5.0, 0.0, 1.5], [9.0, 5.0, 0.0, 1.0]])
+    rng = np.random.default_rng(5)
+    origins = rng.uniform(0.0, 10.0, (400, 3))
+    directions = np.array([7.0, 5.0, 0.0]) + rng.uniform(-3.0, 3.0, (400, 3)) - origins  # about half hit
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    tfar = np.full(400, 20.0)
+    fresh = scene.intersect(origins, directions, tfar)
+    reused = scene.intersect(origins[::-1], directions[::-1], tfar)  # other hits in those arrays first
+    filled = scene.intersect(origins, directions, tfar, out=reused)
+    assert all(f is r for f, r in zip(filled, reused))
+    assert (fresh[0] >= 0).sum() > 50 and (fresh[0] < 0).sum() > 50
+    for a, b in zip(fresh, filled):
+        assert np.array_equal(a, b)
+    with pytest.raises(ValueError, match="out holds hits of 400 rays, not 399"):
+        scene.intersect(origins[:399], directions[:399], tfar[:399], out=reused)
+
+
 def test_a_missing_library_is_one_line(monkeypatch):
     monkeypatch.setattr("importlib.util.find_spec", lambda name: None)
     with pytest.raises(embree.EmbreeUnavailable, match="^embreex is not installed"):

@@ -14,10 +14,15 @@ events depends on its paths alone, so a table depends neither on the number of t
 which thread traced which chunk: bit-identical for any thread count.
 
 Time outside Embree per path (1 thread, the same rays replayed through rtcIntersect1 alone;
-processes of two versions alternated, 400 k paths, best of 7, medians of 3 processes):
+processes of two versions alternated, 400 k paths, best of 7, medians of 3 processes). These
+replays wrote their hits into fresh arrays, and so also timed about 10 ns a ray of first writes
+to new pages: the differences between versions below hold, but each time is short by about
+10 ns a segment. Against a replay into arrays written beforehand (``benchmarks/throughput.py``),
+the time outside Embree is 24-31 ns a segment on the micrograins (ratio 0.75-0.80) and
+47-52 ns a segment on the spheres at normal incidence (0.84-0.85):
 
 - Micrograins (``benchmarks/throughput.py``'s scene, 2.23 segments a path, Embree about
-  225 ns a path): 83 ns with 2048-path chunks in waves of 8 a thread; 46 ns now. What it took:
+  205 ns a path): 83 ns with 2048-path chunks in waves of 8 a thread; 46 ns now. What it took:
   the exit binning without its search loop and mostly without its edge test
   (:func:`microsim.sensor.cell_index`), the ellipsoid projection without divisions, the
   conductor's Fresnel in one division, and longer chunks: a chunk zeroes and fills a tally of
