@@ -16,7 +16,9 @@ of --repeats:
    in the order the kernel makes them (``FusedBackend(log_rays=...)``); they are replayed
    through rtcIntersect1 alone, in that order: raw direct rays/s, and
    ``direct_ratio_per_thread`` = segments/s with 1 thread / raw direct rays/s on the same rays.
-   (Order matters: the same rays shuffled run 1.5 times slower in Embree.)
+   (Order matters: the same rays shuffled run 1.5 times slower in Embree.) On a micrograin
+   scene, also ``direct_ratio_absorbing``: that ratio with grains and base absorbing, the
+   kernel's floor (a path is its start, one query and one absorption).
 3. whole runs, builds included (--run-paths per incidence, 8 realizations, all 4 incidences):
    old backend with 1 and 2 worker processes, new backend with 1 and 2 threads, alternated.
 
@@ -157,6 +159,28 @@ def measure_scene(cfg, paths: int, repeats: int) -> dict:
     return out
 
 
+def absorbing_floor(cfg, paths: int, repeats: int) -> float:
+    """``direct_ratio_per_thread`` of the same scene with every surface absorbing: a path is its
+    start, one query and one absorption, the least the kernel does around a query."""
+    data = cfg.model_dump()
+    data["material"] = {"kind": "absorber"}
+    if "base" in data:
+        data["base"] = {"kind": "absorber"}
+    _, plan, exact = realization(config_module.validate(data), mesh_error=None, subdivisions=None)
+    sensor = Sensor.build(cfg.sensor.cells)
+    wi = np.asarray(plan.incidence_direction(0), np.float64)
+    best_trace = best_replay = np.inf
+    for k in range(repeats):
+        b = Beam(wi, np.uint64(stream_key(cfg.run.seed, 0, k)), paths, 0)
+        seconds, tally, _ = fused_trace(exact, sensor, b, 1)
+        best_trace = min(best_trace, seconds)
+        _, _, logger = fused_trace(exact, sensor, b, 1, log_rays=int(tally.counts[SEGMENTS]))
+        log = [np.ascontiguousarray(c) for c in (logger.ray_log[:, :3], logger.ray_log[:, 3:6], logger.ray_log[:, 6])]
+        hits = logger.embree.intersect(*log)
+        best_replay = min(best_replay, replay([log], lambda o, d, t: logger.embree.intersect(o, d, t, out=hits)))
+    return best_replay / best_trace
+
+
 def measure_runs(cfg, run_paths: int, repeats: int) -> dict:
     """Figure 3: best paths/s of whole runs, alternating the four ways of running."""
     old_cfg, _, _ = realization(cfg, mesh_error=FORMER_MESH_ERROR)
@@ -185,6 +209,8 @@ def main():
     for run in args.scenes:
         cfg = config_module.load(ROOT / "runs" / f"{run}.toml", {"run.paths": args.run_paths, "run.realizations": 8})
         figures = measure_scene(cfg, args.paths, args.repeats)
+        if cfg.scene.kind == "micrograins":
+            figures["direct_ratio_absorbing"] = absorbing_floor(cfg, args.paths, args.repeats)
         figures.update(measure_runs(cfg, args.run_paths, args.repeats))
         figures["speedup_2_workers"] = figures["run_paths_per_s_old_2_workers"] / figures["run_paths_per_s_old_1_worker"]
         figures["speedup_2_threads"] = figures["run_paths_per_s_new_2_threads"] / figures["run_paths_per_s_new_1_thread"]
@@ -222,6 +248,8 @@ def report(label: str, f: dict) -> None:
         print(f"  new backend {t} thr   {f[f'new_segments_per_s_{t}_threads'] / 1e6:6.3f} M segments/s, "
               f"{f[f'new_paths_per_s_{t}_threads'] / 1e3:7.1f} k paths/s")
     print(f"  new, 1 thread / raw direct on the same rays: {f['direct_ratio_per_thread']:.3f}")
+    if "direct_ratio_absorbing" in f:
+        print(f"  the same with every surface absorbing (start, one query, absorb): {f['direct_ratio_absorbing']:.3f}")
     print(f"  whole runs (k paths/s): old 1 worker {f['run_paths_per_s_old_1_worker'] / 1e3:.1f}, "
           f"2 workers {f['run_paths_per_s_old_2_workers'] / 1e3:.1f} (x{f['speedup_2_workers']:.2f}); "
           f"new 1 thread {f['run_paths_per_s_new_1_thread'] / 1e3:.1f}, 2 threads "
