@@ -106,6 +106,15 @@ def replay(batches, run) -> float:
     return time.perf_counter() - start
 
 
+def replay_direct(logger) -> float:
+    """Seconds raw Embree takes on the queries of ``logger`` (a FusedBackend that kept a ray log),
+    in their order: the log is copied into columns and the hits written once before the clock,
+    so that the replay times Embree alone (module doc)."""
+    log = [np.ascontiguousarray(c) for c in (logger.ray_log[:, :3], logger.ray_log[:, 3:6], logger.ray_log[:, 6])]
+    hits = logger.embree.intersect(*log)
+    return replay([log], lambda o, d, t: logger.embree.intersect(o, d, t, out=hits))
+
+
 def fused_trace(scene, sensor, beam, threads: int, log_rays: int = 0):
     """(seconds, tally, backend) of the direct backend tracing ``beam``."""
     backend = FusedBackend(scene, threads, log_rays)
@@ -139,11 +148,7 @@ def measure_scene(cfg, paths: int, repeats: int) -> dict:
             best[f"new_{threads}"] = min(best.get(f"new_{threads}", np.inf), seconds)
         new_segments = int(fused_tally.counts[SEGMENTS])
         _, _, logger = fused_trace(exact, sensor, b, 1, log_rays=new_segments)
-        log = [np.ascontiguousarray(column) for column in (logger.ray_log[:, :3], logger.ray_log[:, 3:6],
-                                                             logger.ray_log[:, 6])]  # copied before timing
-        hits = logger.embree.intersect(*log)  # written once before the clock: the replay times Embree alone
-        best["raw_direct"] = min(best.get("raw_direct", np.inf),
-                                 replay([log], lambda o, d, t: logger.embree.intersect(o, d, t, out=hits)))
+        best["raw_direct"] = min(best.get("raw_direct", np.inf), replay_direct(logger))
     out.update({
         "old_segments": old_segments, "new_segments": new_segments,
         "raw_embreex_rays_per_s": old_segments / best["raw_embreex"],
@@ -175,9 +180,7 @@ def absorbing_floor(cfg, paths: int, repeats: int) -> float:
         seconds, tally, _ = fused_trace(exact, sensor, b, 1)
         best_trace = min(best_trace, seconds)
         _, _, logger = fused_trace(exact, sensor, b, 1, log_rays=int(tally.counts[SEGMENTS]))
-        log = [np.ascontiguousarray(c) for c in (logger.ray_log[:, :3], logger.ray_log[:, 3:6], logger.ray_log[:, 6])]
-        hits = logger.embree.intersect(*log)
-        best_replay = min(best_replay, replay([log], lambda o, d, t: logger.embree.intersect(o, d, t, out=hits)))
+        best_replay = min(best_replay, replay_direct(logger))
     return best_replay / best_trace
 
 

@@ -46,8 +46,9 @@ the time outside Embree is 24-31 ns a segment on the micrograins (ratio 0.75-0.8
   floor: with absorbing grains and base (a path is its start, one query and one absorption)
   the same geometry takes 18.6-20 ns a path outside Embree, ratio 0.815-0.831; at 91 ns a
   query, 0.85 allows 16 ns a segment for everything. A chunk tally laid out cell by cell (a
-  cell's rows in one cache line, through a strided view) was slower: 72 against 65 ns. Binning each chunk's exits in a pass after it, in the same order
-  (the same table to the bit), gained 2.5 ns (64.7 against 67.2, within the noise): not kept.
+  cell's rows in one cache line, through a strided view) was slower: 72 against 65 ns. Binning
+  each chunk's exits in a pass after it, in the same order (the same table to the bit), gained
+  2.5 ns (64.7 against 67.2, within the noise): not kept.
 
 Memory is one scene per process, a few hundred bytes per path row, and the tallies of one wave
 (WAVE_CHUNKS_PER_THREAD x threads x TALLY_ROWS x cells doubles).
