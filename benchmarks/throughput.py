@@ -15,7 +15,9 @@ of --repeats:
    number of paths with 1 and 2 threads, segments/s and paths/s. One more trace logs every query
    in the order the kernel makes them (``FusedBackend(log_rays=...)``); they are replayed
    through rtcIntersect1 alone, in that order: raw direct rays/s, and
-   ``direct_ratio_per_thread`` = segments/s with 1 thread / raw direct rays/s on the same rays.
+   ``direct_ratio_per_thread`` = segments/s with 1 thread / raw direct rays/s on the same rays,
+   and ``direct_outside_embree_ns_per_segment``, the tracer's time beyond the replay's per segment
+   (what the ratio charges to the kernel, whatever Embree costs on the scene).
    (Order matters: the same rays shuffled run 1.5 times slower in Embree.) On a micrograin
    scene, also ``direct_ratio_absorbing``: that ratio with grains and base absorbing, the
    kernel's floor (a path is its start, one query and one absorption).
@@ -161,6 +163,7 @@ def measure_scene(cfg, paths: int, repeats: int) -> dict:
         out[f"new_segments_per_s_{threads}_threads"] = new_segments / best[f"new_{threads}"]
         out[f"new_paths_per_s_{threads}_threads"] = paths / best[f"new_{threads}"]
     out["direct_ratio_per_thread"] = out["new_segments_per_s_1_threads"] / out["raw_direct_rays_per_s"]
+    out["direct_outside_embree_ns_per_segment"] = (best["new_1"] - best["raw_direct"]) / new_segments * 1e9
     return out
 
 
@@ -250,7 +253,9 @@ def report(label: str, f: dict) -> None:
     for t in (1, 2):
         print(f"  new backend {t} thr   {f[f'new_segments_per_s_{t}_threads'] / 1e6:6.3f} M segments/s, "
               f"{f[f'new_paths_per_s_{t}_threads'] / 1e3:7.1f} k paths/s")
-    print(f"  new, 1 thread / raw direct on the same rays: {f['direct_ratio_per_thread']:.3f}")
+    print(f"  new, 1 thread / raw direct on the same rays: {f['direct_ratio_per_thread']:.3f}, outside Embree "
+          f"{f['direct_outside_embree_ns_per_segment']:.1f} ns/segment (raw direct "
+          f"{1e9 / f['raw_direct_rays_per_s']:.1f} ns/ray)")
     if "direct_ratio_absorbing" in f:
         print(f"  the same with every surface absorbing (start, one query, absorb): {f['direct_ratio_absorbing']:.3f}")
     print(f"  whole runs (k paths/s): old 1 worker {f['run_paths_per_s_old_1_worker'] / 1e3:.1f}, "

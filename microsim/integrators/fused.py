@@ -49,6 +49,20 @@ the time outside Embree is 24-31 ns a segment on the micrograins (ratio 0.75-0.8
   cell's rows in one cache line, through a strided view) was slower: 72 against 65 ns. Binning
   each chunk's exits in a pass after it, in the same order (the same table to the bit), gained
   2.5 ns (64.7 against 67.2, within the noise): not kept.
+- Where a micrograin segment's 120 ns go (perf's cpu-clock samples of this kernel): 70 % in
+  Embree (84 ns: less than the replay's 90) and 30 %, 36 ns, in this kernel's code, spread thin
+  (no instruction above 0.9 % of the samples; the largest, the tally's scattered adds). A ratio
+  of 0.85 needs at most 22 ns. Other designs on the same paths, each in processes of its own
+  against the same replay (none kept): a kernel cut down to this scene's physics (conductor
+  grains, Lambertian base; no order cap, inside-hit test, idle count, energy tally, albedo axis
+  or ray log), the same table to 4e-14: 113 ns a segment, ratio 0.80. Lanes of 2, 8 or 32 paths,
+  their queries back to back and then their events grouped by what was hit (nothing, the base, a
+  grain), the same table: 129-138 ns, 0.67-0.70. Embree's packets (rtcIntersect8/16) on the
+  logged queries, in the kernel's order: 83 against 91 ns a ray; primary rays alone, sorted
+  along a Morton curve, 70 against 83-85 (they are 45 % of the segments). The events' arithmetic
+  as branch-free selects over 64 lanes in arrays, on synthetic hits: numba's LLVM left it scalar
+  (cos and sin calls, fifteen arrays that may alias), 57 against 25 ns an event for the
+  branching form.
 
 Memory is one scene per process, a few hundred bytes per path row, and the tallies of one wave
 (WAVE_CHUNKS_PER_THREAD x threads x TALLY_ROWS x cells doubles).
