@@ -46,6 +46,9 @@ INVALID_ID = 0xFFFFFFFF
 MASK_ALL = 0xFFFFFFFF
 ALIGNMENT = 16
 RAYHIT_BYTES = 96
+#: environment variable whose value, if set, is the device's configuration string (rtcNewDevice:
+#: e.g. ``max_isa=avx2`` traces with Embree's AVX2 kernels, as ``benchmarks/cross_isa.py`` does)
+DEVICE_CONFIG_VARIABLE = "MICROSIM_EMBREE_CONFIG"
 
 #: struct RTCRayHit (rtcore_ray.h): RTCRay, then RTCHit with instID and instPrimID of one level
 RAYHIT = np.dtype({
@@ -115,7 +118,7 @@ class _Library:
     def device(self):
         pid = os.getpid()
         if pid not in self._devices:
-            device = self.rtcNewDevice(None)
+            device = self.rtcNewDevice(os.environ.get(DEVICE_CONFIG_VARIABLE, "").encode() or None)
             if not device:
                 raise EmbreeUnavailable(f"rtcNewDevice failed in {self.path.name}")
             self._devices[pid] = device

@@ -1,8 +1,69 @@
-"""Shared helpers of the physics tests: run a config dictionary end to end, read the table back."""
+"""Shared helpers of the physics tests: run a config dictionary end to end, read the table back;
+and the rule that a test of a million paths or more is marked ``slow``, checked on every test.
+
+The paths a test traces are counted where every run hands its units to an executor
+(``runner.EXECUTORS``: paths per realization for every unit it hands back traced, in this
+process, on any executor and any number of workers; units a resumed run takes from its store are
+not traced, nor counted), during the test and during the setup of each fixture it uses; a test
+that reaches :data:`SLOW_PATHS` without the ``slow`` marker fails and says how many it traced.
+Runs in subprocesses are not counted.
+"""
+
+import collections
 
 import pytest
 
 from microsim import config, runner, tables
+
+#: paths from which a test is marked slow (the README: ``-m "not slow"`` leaves them out)
+SLOW_PATHS = 1_000_000
+
+_traced = [0]  # paths handed to executors in this process
+_fixture_paths: dict = {}  # fixture definition -> paths its latest setup traced
+
+
+def _counting(execute):
+    def counted(plan, units, emit, *args, **kwargs):
+        def emit_counted(unit, tally, info):
+            _traced[0] += plan.paths_per_realization
+            emit(unit, tally, info)
+
+        return execute(plan, units, emit_counted, *args, **kwargs)
+
+    return counted
+
+
+def pytest_configure(config):
+    for name, execute in runner.EXECUTORS.items():
+        runner.EXECUTORS[name] = _counting(execute)
+
+
+def pytest_collection_modifyitems(session, config, items):
+    """Files with the most slow tests first, each file's tests in their order: the two processes
+    of ``-n 2 --dist loadfile`` start on the longest files and share the short ones at the end,
+    rather than one finishing a long file alone."""
+    slow = collections.Counter(item.path for item in items if item.get_closest_marker("slow"))
+    items.sort(key=lambda item: -slow[item.path])
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_fixture_setup(fixturedef, request):
+    before = _traced[0]
+    try:
+        return (yield)
+    finally:
+        _fixture_paths[fixturedef] = _traced[0] - before
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_call(item):
+    before = _traced[0]
+    result = yield
+    used = [definitions[-1] for definitions in item._fixtureinfo.name2fixturedefs.values() if definitions]
+    traced = _traced[0] - before + sum(_fixture_paths.get(definition, 0) for definition in used)
+    if traced >= SLOW_PATHS and item.get_closest_marker("slow") is None:
+        pytest.fail(f"traces {traced:,} paths (with its fixtures): mark it @pytest.mark.slow (from {SLOW_PATHS:,})")
+    return result
 
 
 @pytest.fixture
@@ -18,4 +79,3 @@ def simulate(tmp_path):
         return tables.load(path)
 
     return run
-

@@ -32,6 +32,7 @@ def settings(scene, albedo, seed, paths=200_000):
 
 
 @pytest.mark.parametrize("scene", sorted(SCENES))
+@pytest.mark.slow
 def test_four_albedos_from_one_run_equal_four_runs(scene):
     together = runner.run_albedos(settings(scene, ALBEDOS, seed=1))
     assert [r.albedo_value for r in together] == ALBEDOS

@@ -22,6 +22,7 @@ from test_sweep import same_table
 SMALL = RUN.replace("paths = 2_560_000", "paths = 640_000")
 
 
+@pytest.mark.slow
 def test_dask_on_a_local_cluster_is_bit_identical_to_local_workers(tmp_path, capsys):
     config = tmp_path / "run.toml"
     config.write_text(SMALL)
@@ -31,6 +32,7 @@ def test_dask_on_a_local_cluster_is_bit_identical_to_local_workers(tmp_path, cap
     assert same_table(tmp_path / "local.h5", tmp_path / "dask.h5")
 
 
+@pytest.mark.slow
 def test_a_worker_killed_mid_run_costs_only_its_tasks(tmp_path):
     config = tmp_path / "run.toml"
     config.write_text(SMALL)

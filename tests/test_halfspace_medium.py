@@ -88,6 +88,7 @@ def test_scattering_cosines_follow_the_phase_function(phase, cdf):
 
 @pytest.mark.parametrize("phase,p", [("lambert_sphere", phase_lambert_sphere),
                                      ("isotropic", lambda mu: np.full(np.shape(mu), 1.0 / (4.0 * math.pi)))])
+@pytest.mark.slow
 def test_order_1_is_the_single_scattering_of_eq_10(phase, p):
     """Order 1 = c p(-wi.wo) / (mu_i + mu_o) (lambert_sphere_brdf.txt Eq. 10), every cell."""
     result = runner.run(medium_config(0.8, phase))
@@ -96,7 +97,9 @@ def test_order_1_is_the_single_scattering_of_eq_10(phase, p):
 
 # ---------------------------------------------------------------- a: every order, isotropic
 
-@pytest.mark.parametrize("albedo,paths,cells", [(0.5, 1_000_000, 400), (0.9, 1_000_000, 400), (0.999, 200_000, 100)])
+@pytest.mark.parametrize("albedo,paths,cells", [pytest.param(0.5, 1_000_000, 400, marks=pytest.mark.slow),
+                                                pytest.param(0.9, 1_000_000, 400, marks=pytest.mark.slow),
+                                                (0.999, 200_000, 100)])
 def test_isotropic_medium_is_chandrasekhars_closed_form(albedo, paths, cells):
     """The whole table (all orders) against c H(mu_i) H(mu_o) / (4 pi (mu_i + mu_o)), theta_i up
     to 85 deg; and the albedo against 1 - H(mu_i) sqrt(1 - c) within 4 standard errors."""
@@ -110,6 +113,7 @@ def test_isotropic_medium_is_chandrasekhars_closed_form(albedo, paths, cells):
 
 
 @pytest.mark.parametrize("albedo", [0.5, 0.99])
+@pytest.mark.slow
 def test_lambert_sphere_exact_is_the_medium_of_lambert_spheres(albedo):
     """Item b: ``lambert_sphere`` with ``method = "exact"`` (Horak-Chandrasekhar constants, exact H)
     against the medium of Lambert-sphere scatterers, all orders, within the two-sided bounds; the
@@ -121,6 +125,7 @@ def test_lambert_sphere_exact_is_the_medium_of_lambert_spheres(albedo):
     assert any(z2 > chi2_bound(n, REALIZATIONS) for n, z2 in fits)
 
 
+@pytest.mark.slow
 def test_the_check_sees_a_wrong_albedo():
     """Power: the c = 0.9 table against the closed form of c = 0.89 lies above the upper bound."""
     result = runner.run(medium_config(0.9, "isotropic", theta=(60.0,)))

@@ -69,6 +69,7 @@ def resume(config: Path, out: Path, capsys, *flags) -> tuple[int, int]:
     return resumed, traced
 
 
+@pytest.mark.slow
 def test_a_run_killed_at_half_its_units_resumes_bit_identical(tmp_path, uninterrupted, capsys):
     config = tmp_path / "run.toml"
     config.write_text(RUN)
@@ -87,6 +88,7 @@ def test_a_run_killed_at_half_its_units_resumes_bit_identical(tmp_path, uninterr
     assert same_table(out, uninterrupted)
 
 
+@pytest.mark.slow
 def test_a_run_stopped_by_sigterm_keeps_its_units_and_resumes_bit_identical(tmp_path, uninterrupted, capsys):
     config = tmp_path / "run.toml"
     config.write_text(RUN)

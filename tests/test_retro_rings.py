@@ -52,6 +52,7 @@ def test_projected_solid_angle_of_rings_cut_by_the_horizon_matches_monte_carlo()
 
 
 @pytest.mark.parametrize("theta, phi", [(0.0, 0.0), (80.0, 30.0)])
+@pytest.mark.slow
 def test_lambertian_plane_is_albedo_over_pi_on_every_ring(theta, phi):
     _, result = run({"kind": "plane"}, [theta], [phi], rings=12, max_deg=30.0, paths=1_000_000)
     retro = result.retro[0]
@@ -59,6 +60,7 @@ def test_lambertian_plane_is_albedo_over_pi_on_every_ring(theta, phi):
     assert_consistent(np.mean(z * z), len(z))
 
 
+@pytest.mark.slow
 def test_medium_order_one_is_single_scattering_averaged_over_each_ring():
     """The Lambert-sphere phase function varies across the rings (it peaks backwards), so this
     checks the ring geometry and the cos(theta_o) weighting, whole rings and cut ones."""

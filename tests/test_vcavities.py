@@ -131,6 +131,7 @@ def test_anisotropic_ggx_slopes_are_the_isotropic_ones_stretched():
 
 @pytest.mark.parametrize("distribution", ["beckmann", "ggx"])
 @pytest.mark.parametrize("roughness", [0.1, 0.3, 0.7])
+@pytest.mark.slow
 def test_conductor_facets_single_scattering_is_torrance_sparrow(distribution, roughness):
     result = runner.run(vcavity_config(CONDUCTOR, distribution, (roughness, roughness)))
     model = models.create("microfacet", distribution=distribution, roughness=roughness, gaf="torrance_sparrow",
@@ -138,6 +139,7 @@ def test_conductor_facets_single_scattering_is_torrance_sparrow(distribution, ro
     assert_order1_matches(result, model)
 
 
+@pytest.mark.slow
 def test_anisotropic_conductor_facets_at_phi_0_and_90():
     result = runner.run(vcavity_config(CONDUCTOR, "beckmann", (0.2, 0.6), theta=[45.0, 45.0, 85.0, 85.0],
                                        phi=[0.0, 90.0, 0.0, 90.0]))
@@ -147,12 +149,14 @@ def test_anisotropic_conductor_facets_at_phi_0_and_90():
 
 
 @pytest.mark.parametrize("distribution", ["beckmann", "ggx"])
+@pytest.mark.slow
 def test_dielectric_reflection_facets_single_scattering_is_torrance_sparrow(distribution):
     result = runner.run(vcavity_config(DIELECTRIC, distribution, (0.3, 0.3)))
     model = models.create("microfacet", distribution=distribution, roughness=0.3, gaf="torrance_sparrow", eta=1.5)
     assert_order1_matches(result, model)
 
 
+@pytest.mark.slow
 def test_the_check_sees_a_wrong_masking_function():
     """Power: the same table against the Smith G (the V-cavity surface is not a Smith surface)
     lies above the upper bound at grazing incidence, while the Torrance-Sparrow G is within it."""
@@ -175,6 +179,7 @@ DIFFUSE_THETA, DIFFUSE_PHI, DIFFUSE_PATHS = [0.0, 60.0, 85.0, 85.0], [0.0, 0.0, 
 
 
 @pytest.mark.parametrize("material,eta,distribution,roughness", DIFFUSE_FACETS)
+@pytest.mark.slow
 def test_diffuse_facets_single_scattering_is_the_eq_2_integral(material, eta, distribution, roughness):
     result = runner.run(vcavity_config(material, distribution, roughness, theta=DIFFUSE_THETA, phi=DIFFUSE_PHI,
                                        paths=DIFFUSE_PATHS))
@@ -246,6 +251,7 @@ def brute_force_mirror_grooves(n, rng, ax, ay, wi, orders):
     return exits
 
 
+@pytest.mark.slow
 def test_two_mirror_bounces_match_an_independent_brute_force():
     """Orders 1 and 2 of anisotropic mirror grooves at an incidence off both axes, against the
     exit directions of :func:`brute_force_mirror_grooves` binned on the same sensor: mean z^2 per
@@ -337,6 +343,7 @@ def reciprocity_table(tmp_path_factory):
     return tables.load(path), incidences
 
 
+@pytest.mark.slow
 def test_anisotropic_table_is_reciprocal(reciprocity_table):
     table, incidences = reciprocity_table
     assert np.all(table.brdf_stderr > 0)
@@ -344,12 +351,14 @@ def test_anisotropic_table_is_reciprocal(reciprocity_table):
     assert len(z) == 45 and z.max() <= 4.5
 
 
+@pytest.mark.slow
 def test_a_non_reciprocal_quantity_is_detected(reciprocity_table):
     table, incidences = reciprocity_table
     mu = np.cos(0.5 * (table.sensor.cell_bounds()[0] + table.sensor.cell_bounds()[1]))
     assert reciprocity_z(table, incidences, table.brdf * mu, table.brdf_stderr * mu).max() > 4.5
 
 
+@pytest.mark.slow
 def test_isotropic_table_is_reciprocal():
     incidences = ring_incidences()[::2]
     cfg = vcavity_config({"kind": "interfaced_lambert", "albedo": 0.8, "eta": 1.5}, "ggx", (0.6, 0.6),
@@ -366,6 +375,7 @@ def test_isotropic_table_is_reciprocal():
 
 # ---------------------------------------------------------------- e: limits
 
+@pytest.mark.slow
 def test_nearly_flat_lambertian_grooves_are_the_lambertian_plane():
     """Every cell against albedo / pi: mean z^2 within the two-sided bounds, and the largest |z| of
     the 300 cells below the Student-t quantile that one cell exceeds with probability 1e-3 / 300."""

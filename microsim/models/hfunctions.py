@@ -208,12 +208,14 @@ class HFunction:
     def log(self, mu) -> np.ndarray:
         """ln H(mu), accurate also where H - 1 is tiny (use ``np.expm1`` for H - 1)."""
         mu = np.asarray(mu, dtype=np.float64)
-        flat = np.ascontiguousarray(np.minimum(mu, MU_MAX).reshape(-1))
+        flat = np.minimum(mu, MU_MAX).reshape(-1)
         if np.any(~(flat >= 0.0)):
             raise ValueError("mu must be >= 0")
-        out = np.empty_like(flat)
-        _fock_sum(self._log_k, self._s_first, _STEP, _WINDOW, flat, out)
-        return out.reshape(mu.shape)
+        # each distinct mu once: a model's quadrature repeats the cosines of a ring (and mu_i)
+        distinct, where = np.unique(flat, return_inverse=True)
+        out = np.empty_like(distinct)
+        _fock_sum(self._log_k, self._s_first, _STEP, _WINDOW, distinct, out)
+        return out[where].reshape(mu.shape)
 
     def moments(self, n: int) -> np.ndarray:
         """alpha_k = int_0^1 H(mu) mu^k dmu, k = 0..n (Gauss rule graded as mu = u^3 for the mu ln mu at 0)."""
