@@ -10,11 +10,12 @@ C compiler), numba with its target CPU and features set to that x86-64 level
     python benchmarks/cross_isa.py measure [--isa avx2 avx sse4.2]   # 2 min an ISA on 2 cores
     python benchmarks/cross_isa.py pytest avx2 [PYTEST ARGS]          # tests/test_golden.py as on AVX2
 
-``measure`` prints, per golden and ISA, the largest move of any traced dataset as a fraction of
-the dataset's largest value (of its estimate, for a ``_stderr``: the measure of
-``test_golden.HOST_TOLERANCE``), the largest move of the layout in ulps and of the event counts
-as a fraction; ``pytest`` runs the golden test under that emulation, where ``platform_key`` names
-the capped instruction set, so the test takes its other-platform branch.
+Needs numpy 2.4 or later (its dispatch names) and a C compiler. ``measure`` prints, per golden
+and ISA, the largest move of any traced dataset as a fraction of the dataset's largest value (of
+its estimate, for a ``_stderr``: the measure of ``test_golden.HOST_TOLERANCE``), the largest
+move of the layout in ulps and of the event counts in square roots of the largest count
+(``COUNT_SPREAD``); ``pytest`` runs the golden test under that emulation, where ``platform_key``
+names the capped instruction set, so the test takes its other-platform branch.
 """
 
 from __future__ import annotations
@@ -82,9 +83,9 @@ def trace_all(out: Path) -> None:
         np.savez(out / f"{name}.npz", **{key.replace("/", "."): value for key, value in arrays.items()})
 
 
-def moves(name: str, now: dict, golden: dict) -> tuple[float, float, float]:
+def moves(now: dict, golden: dict) -> tuple[float, float, float]:
     """(largest move of a traced float dataset as a fraction of its estimate's largest value,
-    largest layout move in ulps, largest event-count move as a fraction)."""
+    largest layout move in ulps, largest event-count move in square roots of the largest count)."""
     traced = layout = counts = 0.0
     for key, expected in golden.items():
         change = np.abs(now[key].astype(float) - expected.astype(float))
@@ -92,25 +93,25 @@ def moves(name: str, now: dict, golden: dict) -> tuple[float, float, float]:
             if expected.dtype.kind == "f":
                 layout = max(layout, float(np.max(change / np.spacing(np.abs(expected)))))
         elif expected.dtype.kind != "f":
-            counts = max(counts, float(np.max(change) / max(1, np.max(np.abs(expected)))))
+            counts = max(counts, float(np.max(change) / np.sqrt(max(1, np.max(np.abs(expected))))))
         else:
             scale = np.max(np.abs(golden[key.removesuffix("_stderr")]))
-            traced = max(traced, float(np.max(change) / scale) if scale else float(np.max(change) > 0) * np.inf)
+            traced = max(traced, float(np.max(change) / scale) if scale else (np.inf if np.max(change) > 0 else 0.0))
     return traced, layout, counts
 
 
 def measure(isas) -> None:
     print(f"host {test_golden.platform_key()}; moves against the goldens of tests/data")
-    print(f"{'golden':18s} {'isa':7s} {'traced (fraction)':>18s} {'layout (ulps)':>14s} {'counts (fraction)':>18s}  bound")
+    print(f"{'golden':18s} {'isa':7s} {'traced (fraction)':>18s} {'layout (ulps)':>14s} {'counts (sqrt)':>18s}  bound")
     for isa in isas:
         with tempfile.TemporaryDirectory() as tmp:
             tmp = Path(tmp)
             subprocess.run([sys.executable, __file__, "_trace", str(tmp)], env=emulation(isa, tmp), check=True)
             for name in test_golden.GOLDEN:
-                golden, made_on = test_golden.load_golden(name)
+                golden, _ = test_golden.load_golden(name)
                 with np.load(tmp / f"{name}.npz") as stored:
                     now = {key.replace(".", "/"): stored[key] for key in stored.files}
-                traced, layout, counts = moves(name, now, golden)
+                traced, layout, counts = moves(now, golden)
                 print(f"{name:18s} {isa:7s} {traced:18.3g} {layout:14.3g} {counts:18.3g}  "
                       f"{test_golden.HOST_TOLERANCE[name]:g}")
 

@@ -7,7 +7,7 @@ the surface tracer would keep running the old ``scatter``. :func:`install` wraps
 cache locators, in numba's own order (so ``NUMBA_CACHE_DIR`` and read-only installs behave as
 usual), so that a kernel defined in the microsim package, or in the checkout's benchmarks/ and
 tests/ (which call them), is stamped with its own file's stamp and the hash of every microsim
-source: any edit of microsim recompiles them all (about 40 s).
+source: any edit of microsim recompiles them all (over a minute; README, numba caches).
 """
 
 from __future__ import annotations

@@ -6,10 +6,8 @@ The paths a test traces are counted where every run hands its units to an execut
 process, on any executor and any number of workers; units a resumed run takes from its store are
 not traced, nor counted), during the test and during the setup of each fixture it uses; a test
 that reaches :data:`SLOW_PATHS` without the ``slow`` marker fails and says how many it traced.
-Runs in subprocesses are not counted.
+Runs in subprocesses, and tracers a test calls itself (``executors.trace_units``), are not counted.
 """
-
-import collections
 
 import pytest
 
@@ -36,14 +34,6 @@ def _counting(execute):
 def pytest_configure(config):
     for name, execute in runner.EXECUTORS.items():
         runner.EXECUTORS[name] = _counting(execute)
-
-
-def pytest_collection_modifyitems(session, config, items):
-    """Files with the most slow tests first, each file's tests in their order: the two processes
-    of ``-n 2 --dist loadfile`` start on the longest files and share the short ones at the end,
-    rather than one finishing a long file alone."""
-    slow = collections.Counter(item.path for item in items if item.get_closest_marker("slow"))
-    items.sort(key=lambda item: -slow[item.path])
 
 
 @pytest.hookimpl(wrapper=True)

@@ -282,6 +282,7 @@ def test_two_mirror_bounces_match_an_independent_brute_force():
 
 # ---------------------------------------------------------------- orders as the paper reports them
 
+@pytest.mark.slow  # 2 x 400 000 paths, traced twice (once by executors.trace_units)
 def test_orders_1_and_2_give_f2_with_their_own_error_and_compare_reads_them(simulate, tmp_path, capsys):
     """brdf_orders12 is order 1 + order 2 (the paper's f2), with the standard error of the
     per-realization sums (the two orders are correlated, so it is not their errors in quadrature);
