@@ -7,7 +7,7 @@ C compiler), numba with its target CPU and features set to that x86-64 level
 (``NUMBA_CPU_NAME``, ``NUMBA_CPU_FEATURES``), numpy with its wider SIMD kernels switched off
 (``NPY_DISABLE_CPU_FEATURES``).
 
-    python benchmarks/cross_isa.py measure [--isa avx2 avx sse4.2]   # 2 min an ISA on 2 cores
+    python benchmarks/cross_isa.py measure [--isa native avx2 avx sse4.2]   # 2 min an ISA on 2 cores
     python benchmarks/cross_isa.py pytest avx2 [PYTEST ARGS]          # tests/test_golden.py as on AVX2
 
 Needs numpy 2.4 or later (its dispatch names) and a C compiler. ``measure`` prints, per golden
@@ -58,8 +58,11 @@ void *rtcNewDevice(const char *config) {
 
 
 def emulation(isa: str, directory: Path) -> dict:
-    """The environment in which this host traces as a CPU of ``isa`` would."""
+    """The environment in which this host traces as a CPU of ``isa`` would (``native``: as itself)."""
     import llvmlite.binding as llvm
+
+    if isa == "native":
+        return dict(os.environ)
 
     from microsim import embree
 
@@ -120,7 +123,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     commands = parser.add_subparsers(dest="command", required=True)
     measure_parser = commands.add_parser("measure", help="trace the goldens as each ISA and print their moves")
-    measure_parser.add_argument("--isa", nargs="+", choices=list(LEVELS), default=list(LEVELS))
+    measure_parser.add_argument("--isa", nargs="+", choices=["native", *LEVELS], default=list(LEVELS))
     pytest_parser = commands.add_parser("pytest", help="run tests/test_golden.py as the ISA")
     pytest_parser.add_argument("isa", choices=list(LEVELS))
     pytest_parser.add_argument("pytest_args", nargs=argparse.REMAINDER)

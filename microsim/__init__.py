@@ -1,7 +1,8 @@
 """microsim: ground-truth BRDF tables from explicit random microgeometry."""
 
-from . import kernel_cache
+from . import inlining, kernel_cache
 
 __version__ = "0.1.0"
 
 kernel_cache.install()
+inlining.install()

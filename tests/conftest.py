@@ -11,7 +11,8 @@ Runs in subprocesses, and tracers a test calls itself (``executors.trace_units``
 
 import pytest
 
-from microsim import config, runner, tables
+from microsim import runner, tables
+from microsim.config import validate
 
 #: paths from which a test is marked slow (the README: ``-m "not slow"`` leaves them out)
 SLOW_PATHS = 1_000_000
@@ -62,7 +63,7 @@ def simulate(tmp_path):
     counter = iter(range(1000))
 
     def run(data: dict, workers: int = 1) -> tables.Table:
-        cfg = config.validate(data)
+        cfg = validate(data)
         result = runner.run(cfg, workers=workers)
         path = tmp_path / f"table{next(counter)}.h5"
         tables.write(path, result, cfg)
