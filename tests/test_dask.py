@@ -8,10 +8,11 @@ import socket
 import subprocess
 import sys
 import time
-from collections import Counter
+from collections import Counter, defaultdict
 
 import pytest
 from distributed import LocalCluster
+from distributed.diagnostics.plugin import SchedulerPlugin
 
 from microsim import config as config_module
 from microsim import executors, runner, tables, unit_store
@@ -20,6 +21,19 @@ from test_resume import RUN, wait_for_units
 from test_sweep import same_table
 
 SMALL = RUN.replace("paths = 2_560_000", "paths = 640_000")
+
+
+class Assignments(SchedulerPlugin):
+    """Every worker a task was sent to, by worker address: a task the scheduler sends to a
+    worker after another's processing list was read is that worker's too."""
+
+    def __init__(self, scheduler):
+        self.scheduler, self.sent = scheduler, defaultdict(set)
+
+    def transition(self, key, start, finish, *args, **kwargs):
+        task = self.scheduler.tasks.get(key)
+        if finish == "processing" and task is not None and task.processing_on is not None:
+            self.sent[task.processing_on.address].add(key)
 
 
 @pytest.mark.slow
@@ -40,6 +54,8 @@ def test_a_worker_killed_mid_run_costs_only_its_tasks(tmp_path):
     assert main(["run", str(config), "--out", str(tmp_path / "local.h5"), "--workers", "2"]) == 0
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         pids = {nanny.worker_address: nanny.process.pid for nanny in cluster.workers.values()}
+        assignments = Assignments(cluster.scheduler)
+        cluster.scheduler.add_plugin(assignments)
         lost, emitted, killed = set(), [], []
 
         def kill_one_worker(unit, paths, resumed):
@@ -47,8 +63,8 @@ def test_a_worker_killed_mid_run_costs_only_its_tasks(tmp_path):
             if not lost:  # at the first unit back: kill a worker that is tracing
                 victim = next(ws for ws in cluster.scheduler.workers.values() if ws.processing)
                 lost.update(task.key for task in victim.processing)
-                killed.append(pids[victim.address])
-                os.kill(killed[0], signal.SIGKILL)
+                killed.append((pids[victim.address], victim.address))
+                os.kill(killed[0][0], signal.SIGKILL)
 
         result = runner.run(cfg, workers=2, progress=kill_one_worker, executor="dask",
                             scheduler=cluster.scheduler_address)
@@ -62,9 +78,10 @@ def test_a_worker_killed_mid_run_costs_only_its_tasks(tmp_path):
             time.sleep(0.1)
         replaced = alive()
     tables.write(tmp_path / "dask.h5", result, cfg)
-    assert lost and killed[0] not in replaced and len(replaced) == 2  # the nanny started a new worker
+    assert lost and killed[0][0] not in replaced and len(replaced) == 2  # the nanny started a new worker
     retried = {key for key, count in starts.items() if count > 1}
-    assert retried and retried <= lost, (retried, lost)
+    held = assignments.sent[killed[0][1]]  # what it was tracing, and what was sent to it before it was seen dead
+    assert retried and lost <= held and retried <= held, (retried, held)
     assert sorted(emitted) == sorted(runner.Plan.from_config(cfg).units)  # every unit once
     assert same_table(tmp_path / "local.h5", tmp_path / "dask.h5")
 
