@@ -34,7 +34,8 @@ def test_the_blocks_of_one_scope_share_one_copy_of_it():
     assert len({id(block.scope) for block in copied}) == 1
     assert copied[0].scope is not scope
     assert set(copied[0].scope.localvars._con) == set(scope.localvars._con)
-    assert len({id(copy.deepcopy(block).scope) for block in blocks.values()}) == len(blocks)  # numba's own way
+    one_by_one = [copy.deepcopy(block) for block in blocks.values()]  # numba's own way: a scope each
+    assert len({id(block.scope) for block in one_by_one}) == len(blocks)
 
 
 @numba.njit(inline="always")
