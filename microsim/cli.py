@@ -163,7 +163,7 @@ def run(config_path, out, workers, threads, backend, paths, seed, force, resume,
         _check_dask(scheduler)
     options = Options(workers, threads, force, resume, executor, scheduler)
     if points is not None:
-        _run_sweep(points, out if out is not None else Path(config_path.stem), options)
+        _run_sweep(points, out if out is not None else Path(config_path.stem), options, config_path)
         return
     out = out if out is not None else Path(f"{config_path.stem}.h5")
     if out.is_dir():
@@ -174,6 +174,8 @@ def run(config_path, out, workers, threads, backend, paths, seed, force, resume,
         raise BadInput(str(err)) from None
     # a run of several albedos writes one table each, named from --out with the albedo appended
     outs = [out.with_name(f"{out.stem}_albedo{c:g}{out.suffix}") for c in plan.albedos] or [out]
+    for path in outs:
+        _refuse_input(path, config_path)
     total = plan.paths * plan.n_incidences
     results = _trace(config, plan, outs, unit_store.store_path(out), options)
     summaries = [_albedo_summary(plan, result) for result in results]
@@ -325,13 +327,15 @@ def list_models():
             click.echo("    " + "  ".join(f"{c:<{w}}" for c, w in zip(cells, widths)) + f"  {p.doc}")
 
 
-def _run_sweep(points, out_dir: Path, options: Options) -> None:
+def _run_sweep(points, out_dir: Path, options: Options, config_path: Path) -> None:
     """Trace every point of a sweep into ``out_dir``: one table per point, named from its values,
     and ``index.csv`` (rewritten as each point ends: values, table, status, albedo per incidence).
     With --resume, a point whose table is there (made from the same config) is kept as it is,
     and the point that was interrupted resumes from its units."""
     from . import runner, unit_store
 
+    for point in points:
+        _refuse_input(out_dir / f"{point.name}.h5", config_path)
     if out_dir.exists() and not out_dir.is_dir():
         raise BadInput(f"--out: {out_dir} is a file; a sweep writes its tables into a directory")
     if out_dir.is_dir() and any(out_dir.iterdir()) and not (options.force or options.resume):
@@ -488,6 +492,13 @@ def _write_index(out_dir: Path, rows) -> None:
         writer.writeheader()
         writer.writerows(rows)
     os.replace(tmp, out_dir / sweep.INDEX)
+
+
+def _refuse_input(out: Path, config_path: Path) -> None:
+    """BadInput if the table ``out`` would replace the config it is traced from (--force or not)."""
+    same = out.resolve() == config_path.resolve() or (out.exists() and os.path.samefile(out, config_path))
+    if same:
+        raise BadInput(f"--out: {out} is the config file {config_path}; give the table another name")
 
 
 def _check_writable(out: Path, force: bool) -> None:

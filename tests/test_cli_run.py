@@ -63,6 +63,24 @@ def test_tables_are_bit_identical_for_any_number_of_workers_and_threads(tmp_path
             assert a1[key] == a2[key], key
 
 
+@pytest.mark.parametrize("how", ["same path", "symlink", "sweep"])
+def test_the_table_never_replaces_its_config(tmp_path, capsys, how):
+    """Issue 24, defect 2: `run c.toml --out c.toml --force` wrote the table over the config."""
+    text = SPHERES.replace("paths = 20_000", "paths = 200")
+    if how == "sweep":
+        text = text.replace('name = "small"', 'name = "small"\n[sweep]\n"material.albedo" = [0.5]')
+    config = tmp_path / ("albedo0.5.h5" if how == "sweep" else "c.toml")  # a sweep point's table name
+    config.write_text(text)
+    out = {"same path": config, "symlink": tmp_path / "link.h5", "sweep": tmp_path}[how]
+    if how == "symlink":
+        out.symlink_to(config)
+    for force in ([], ["--force"]):
+        assert main(["run", str(config), "--out", str(out), *force]) == 2
+        err = capsys.readouterr().err.splitlines()
+        assert len(err) == 1 and "is the config file" in err[0], err
+        assert config.read_text() == text
+
+
 def test_existing_table_is_not_overwritten_without_force(tmp_path, capsys):
     config = tmp_path / "small.toml"
     config.write_text(SPHERES.replace("paths = 20_000", "paths = 200"))
