@@ -173,7 +173,7 @@ def run(config_path, out, workers, threads, backend, paths, seed, force, resume,
     except runner.PlanError as err:
         raise BadInput(str(err)) from None
     # a run of several albedos writes one table each, named from --out with the albedo appended
-    outs = [out.with_name(f"{out.stem}_albedo{c:g}{out.suffix}") for c in plan.albedos] or [out]
+    outs = [out.with_name(f"{out.stem}_albedo{albedo_text(c)}{out.suffix}") for c in plan.albedos] or [out]
     for path in outs:
         _refuse_input(path, config_path)
     total = plan.paths * plan.n_incidences
@@ -492,6 +492,13 @@ def _write_index(out_dir: Path, rows) -> None:
         writer.writeheader()
         writer.writerows(rows)
     os.replace(tmp, out_dir / sweep.INDEX)
+
+
+def albedo_text(albedo: float) -> str:
+    """The albedo in a table's name: its shortest %g form where that reads back as the same number,
+    else all its digits, so that distinct albedos name distinct tables (0.1 and 0.1000001)."""
+    short = f"{albedo:g}"
+    return short if float(short) == albedo else repr(float(albedo))
 
 
 def _refuse_input(out: Path, config_path: Path) -> None:

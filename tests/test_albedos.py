@@ -89,3 +89,17 @@ def test_the_cli_writes_one_table_per_albedo(tmp_path, capsys):
         table = tables.load(tmp_path / f"t_albedo{albedo:g}.h5")
         assert f"albedo = {albedo}" in table.attrs["config_toml"] and table.attrs["albedo_traced"] == 0.8
     assert not (tmp_path / "t.h5").exists()
+
+
+@pytest.mark.parametrize("force", [[], ["--force"]])
+def test_albedos_that_print_alike_name_distinct_tables(tmp_path, capsys, force):
+    """Issue 24, defect 3: 0.1 and 0.1000001 both named t_albedo0.1.h5; one table was lost."""
+    from microsim import tables
+    from microsim.cli import main
+
+    path = tmp_path / "run.toml"
+    path.write_text(small_config('kind = "halfspace_medium"').replace("albedo = 0.8", "albedo = [0.1, 0.1000001]"))
+    assert main(["run", str(path), "--out", str(tmp_path / "t.h5"), *force]) == 0
+    assert "2 tables written" in capsys.readouterr().out
+    for name, albedo in (("t_albedo0.1.h5", 0.1), ("t_albedo0.1000001.h5", 0.1000001)):
+        assert f"albedo = {albedo}" in tables.load(tmp_path / name).attrs["config_toml"]
