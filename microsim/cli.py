@@ -212,6 +212,7 @@ def compare(table_path, model_name, params, order, as_json, plot_dir):
     from . import models
 
     values = _model_parameters(params)
+    _check_plot_dir(plot_dir)
     try:
         model = models.create(model_name, **values)
     except ValueError as err:
@@ -244,6 +245,7 @@ def fit(table_path, model_name, free, params, order, as_json, plot_dir):
     if model_name not in models.available():
         raise BadInput(f"--model: unknown model {model_name!r}; available: {', '.join(models.available())}")
     values = _model_parameters(params)
+    _check_plot_dir(plot_dir)
     table = _load_table(table_path)
     try:
         result = fit_module.fit(table, model_name, list(free), values, order)
@@ -265,6 +267,20 @@ def _model_parameters(params) -> dict:
             raise BadInput(f"--param {item!r}: expected KEY=VALUE")
         values[key.strip()] = value.strip()
     return values
+
+
+def _check_plot_dir(plot_dir) -> None:
+    """BadInput unless the figures' directory ``plot_dir`` exists and is writable or can be made
+    (checked before the work: a comparison or a fit can take minutes)."""
+    if plot_dir is None:
+        return
+    existing = plot_dir
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise BadInput(f"--plot: {existing} is a file; give a directory for the figures")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise BadInput(f"--plot: directory {existing} is not writable")
 
 
 def _load_table(table_path):

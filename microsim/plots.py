@@ -116,11 +116,13 @@ def incidence_plane_cells(sensor, phi_i: float):
 
 
 def write_all(comparison, sensor, directory: Path) -> list[Path]:
-    """Both figures for every incidence; returns the files written."""
+    """Both figures for every incidence, named by model, order, incidence number, theta_i and
+    phi_i (distinct for distinct incidences and orders); returns the files written."""
     directory.mkdir(parents=True, exist_ok=True)
     written = []
-    for i, theta in enumerate(comparison.theta_i):
-        stem = f"{comparison.model_name}_theta{np.degrees(theta):05.1f}"
+    for i, (theta, phi) in enumerate(zip(comparison.theta_i, comparison.phi_i)):
+        stem = (f"{comparison.model_name}_order{comparison.order}_i{i:02d}_theta{np.degrees(theta):05.1f}"
+                f"_phi{np.degrees(phi):05.1f}")
         for kind, draw in (("polar", polar_maps), ("plane", incidence_plane)):
             path = directory / f"{stem}_{kind}.png"
             draw(comparison, sensor, i, path)

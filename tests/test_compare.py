@@ -138,3 +138,35 @@ def test_cells_without_standard_error_are_refined_until_the_albedo_converges():
     assert abs(averages @ p - reference @ p) <= ALBEDO_TOLERANCE * (reference @ p)
     coarse = sensor.cell_average(lambda w: model(np.broadcast_to(wi, w.shape), w), 8, 8)
     assert abs(coarse @ p - reference @ p) > ALBEDO_TOLERANCE * (reference @ p)  # the lobe needs the refinement
+
+
+def test_figures_of_every_incidence_and_order_keep_their_own_names(tmp_path, capsys):
+    """Issue 24, defect 4: two incidences of one theta_i, or two orders, into one directory wrote
+    over each other's figures."""
+    from microsim import config, runner, tables
+
+    cfg = config.validate({"scene": {"kind": "plane"}, "material": {"kind": "lambert", "albedo": 0.5},
+                           "illumination": {"theta_i_deg": [60.0, 60.0], "phi_i_deg": [0.0, 90.0]},
+                           "sensor": {"cells": 50}, "run": {"paths": 6400, "realizations": 4, "seed": 1}})
+    path = tmp_path / "t.h5"
+    tables.write(path, runner.run(cfg), cfg)
+    for order in ("all", "1"):
+        assert main(["compare", str(path), "--model", "lambert", "--param", "albedo=0.5", "--order", order,
+                     "--plot", str(tmp_path / "figs")]) == 0
+        assert "4 figures written" in capsys.readouterr().out
+    assert len(list((tmp_path / "figs").glob("*.png"))) == 8
+
+
+@pytest.mark.parametrize("command", [["compare", "--param", "albedo=0.5"], ["fit", "--free", "albedo"]])
+def test_figures_to_a_place_that_cannot_take_them_are_refused_before_the_work(small_table, tmp_path, capsys,
+                                                                               command, monkeypatch):
+    """Issue 24, defect 5: a --plot under a file ended in a traceback after the whole comparison."""
+    from microsim import compare as compare_module
+
+    (tmp_path / "file").write_text("")
+    monkeypatch.setattr(compare_module, "compare", lambda *a, **k: pytest.fail("the work ran before the check"))
+    verb, *options = command
+    assert main([verb, str(small_table), "--model", "lambert", *options, "--plot", str(tmp_path / "file" / "figs")]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and "--plot" in lines[0] and "is a file" in lines[0] and captured.out == "", captured.err
