@@ -146,8 +146,12 @@ class CellRule:
 
 
 def compare(table, model, order: str = "all") -> Comparison:
-    """Average ``model`` over the cells of ``table`` (a :class:`microsim.tables.Table`) and compare."""
+    """Average ``model`` over the cells of ``table`` (a :class:`microsim.tables.Table`) and compare;
+    ValueError (one line) if no cell has signal."""
     names, sim, stderr, albedo_sim, albedo_se = selection(table, order)
+    if not with_signal(sim, stderr).any():
+        raise ValueError(f"table {table.path}: no cell of order {order} has signal (a value above "
+                         f"{SIGNAL_TO_NOISE:g} standard errors): nothing to compare; trace more paths or use fewer cells")
     modelled = np.zeros_like(sim)
     worst = 0.0
     for i, wi in enumerate(table.wi):

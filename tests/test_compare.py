@@ -170,3 +170,18 @@ def test_figures_to_a_place_that_cannot_take_them_are_refused_before_the_work(sm
     captured = capsys.readouterr()
     lines = captured.err.strip().splitlines()
     assert len(lines) == 1 and "--plot" in lines[0] and "is a file" in lines[0] and captured.out == "", captured.err
+
+
+def test_a_table_without_signal_is_refused_in_one_line(tmp_path, capsys):
+    """Issue 24, defect 9: 2000 paths over 200 000 cells printed NaN and exited 0."""
+    path = tmp_path / "sparse.h5"
+    from microsim import config, runner, tables
+
+    cfg = config.validate({"scene": {"kind": "plane"}, "material": {"kind": "lambert", "albedo": 0.5},
+                           "illumination": {"theta_i_deg": [0.0]}, "sensor": {"cells": 200_000},
+                           "run": {"paths": 2000, "realizations": 4, "seed": 1}})
+    tables.write(path, runner.run(cfg), cfg)
+    assert main(["compare", str(path), "--model", "lambert", "--param", "albedo=0.5"]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and "no cell" in lines[0] and "signal" in lines[0] and captured.out == "", captured
