@@ -178,7 +178,7 @@ def describe_error(error: dict, data: dict) -> str:
         if len(keys) > 1 and message.startswith(keys[-1] + " "):  # a field's rule: add its section
             return ".".join(keys[:-1]) + "." + message
         return message
-    shown = f" = {value!r}" if value is not None and not isinstance(value, dict) else ""
+    shown = f" = {excerpt(value)}" if value is not None and not isinstance(value, dict) else ""
     if kind == "extra_forbidden":
         return f"{key}: unknown key; allowed keys here: {', '.join(owner.model_fields)}"
     if kind == "missing":
@@ -192,7 +192,24 @@ def describe_error(error: dict, data: dict) -> str:
     if kind == "string_pattern_mismatch":  # the only pattern: no control characters
         return f"{key}{shown}: contains a control character; accepted: printable text"
     problem = "out of range" if kind in _RANGE_ERRORS else error["msg"].lower()
+    if kind in ("too_short", "too_long") and isinstance(value, list):
+        problem = f"{len(value):,} items, out of range"
     return f"{key}{shown}: {problem}; {_accepted(node, error)}"
+
+
+#: characters of a value a message quotes
+EXCERPT = 60
+
+
+def excerpt(value) -> str:
+    """``repr(value)``, or its first items and length if that is longer than EXCERPT characters."""
+    text = repr(value)
+    if len(text) <= EXCERPT:
+        return text
+    if isinstance(value, list):
+        head = ", ".join(excerpt(item) for item in value[:3])
+        return f"[{head}, ... ({len(value):,} items)]"
+    return text[:EXCERPT - 3] + "..."
 
 
 _RANGE_ERRORS = {"greater_than", "greater_than_equal", "less_than", "less_than_equal", "too_short", "too_long"}
@@ -295,7 +312,11 @@ def _range(metadata) -> str:
 
 
 def _length(info) -> str:
-    for m in info.metadata:
-        if isinstance(m, annotated_types.MinLen):
-            return f" (at least {m.min_length})"
-    return ""
+    """How many items a list field takes: " (1 to 256 of them)", " (at least 1)"."""
+    lo = next((m.min_length for m in info.metadata if isinstance(m, annotated_types.MinLen)), None)
+    hi = next((m.max_length for m in info.metadata if isinstance(m, annotated_types.MaxLen)), None)
+    if lo is not None and hi is not None:
+        return f" ({lo} to {hi} of them)"
+    if hi is not None:
+        return f" (at most {hi})"
+    return f" (at least {lo})" if lo is not None else ""

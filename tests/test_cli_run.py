@@ -266,3 +266,14 @@ def test_a_failing_worker_ends_the_run_in_one_line(failure, line, tmp_path, caps
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and err[0].startswith(line)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["small.toml"]
+
+
+@pytest.mark.parametrize("count", [0, 257, 1_000_000])
+def test_a_list_of_the_wrong_length_names_the_limit_and_quotes_an_excerpt(count, tmp_path, capsys):
+    """Issue 24, defect 11: a million incidences were refused without naming 256, echoing 5 MB."""
+    config = tmp_path / "bad.toml"
+    config.write_text(SPHERES.replace("theta_i_deg = [0.0, 60.0]", f"theta_i_deg = {[10.0] * count}"))
+    assert main(["run", str(config), "--out", str(tmp_path / "bad.h5")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "illumination.theta_i_deg" in lines[0], lines
+    assert "1 to 256" in lines[0] and f"{count:,} items" in lines[0] and len(lines[0]) < 250, lines[0]
