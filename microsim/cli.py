@@ -74,13 +74,15 @@ class Options:
 
 
 @contextlib.contextmanager
-def _stop_on_signals():
+def _stop_on_signals(finishes_the_command: bool = False):
     """Within the block, the first of STOP_SIGNALS raises :class:`Stopped` (in the main thread,
     between bytecodes: the runner's clean-up then kills its workers); later ones are ignored while
     it stops. Signals ignored on entry stay ignored; outside the main thread nothing changes.
 
     Yields ``hold``: within ``with hold():`` (writing the tables once tracing is over) a signal is
-    only noted, and raises :class:`Stopped` when the block ends, saying the work was done."""
+    only noted, and raises :class:`Stopped` when the block ends, saying the work was done.
+    ``finishes_the_command``: once the block ends without an error, the command's work is done,
+    and stop signals are ignored until the command returns (its report printed, exit 0)."""
     stopping, holding = [], []
 
     @contextlib.contextmanager
@@ -109,9 +111,14 @@ def _stop_on_signals():
             signal.signal(signum, stop)
     try:
         yield hold
-    finally:
+    except BaseException:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+        raise
+    for signum, handler in previous.items():
+        signal.signal(signum, signal.SIG_IGN if finishes_the_command else handler)
+    if finishes_the_command:
+        click.get_current_context().call_on_close(lambda: [signal.signal(n, h) for n, h in previous.items()])
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -177,7 +184,7 @@ def run(config_path, out, workers, threads, backend, paths, seed, force, resume,
     for path in outs:
         _refuse_input(path, config_path)
     total = plan.paths * plan.n_incidences
-    results = _trace(config, plan, outs, unit_store.store_path(out), options)
+    results = _trace(config, plan, outs, unit_store.store_path(out), options, finishes_the_command=True)
     summaries = [_albedo_summary(plan, result) for result in results]
     traced = total * results[0].units_traced / len(plan.units)
     rate = traced / results[0].wall_time
@@ -388,7 +395,7 @@ def _run_sweep(points, out_dir: Path, options: Options, config_path: Path) -> No
             continue
         path = out_dir / row["table"]
         result = _trace(point.config, plan, [path], unit_store.store_path(path), options,
-                        label=f"sweep point {point.name}: ")[0]
+                        label=f"sweep point {point.name}: ", finishes_the_command=point is points[-1])[0]
         _index_albedos(row, plan, [a.mean[RESULT_ALL_ORDERS] for a in result.albedo])
         _write_index(out_dir, rows)
         click.echo(f"{point.name}: albedo {_albedo_summary(plan, result)} | {result.wall_time:.1f} s")
@@ -418,8 +425,9 @@ def _index_albedos(row: dict, plan, albedos) -> None:
         row[f"albedo_theta{math.degrees(t):g}"] = f"{a:.6g}"
 
 
-def _trace(config, plan, outs, directory: Path, options: Options, label: str = ""):
-    """Trace a planned config and write its tables (one per albedo) to ``outs``; finished units
+def _trace(config, plan, outs, directory: Path, options: Options, label: str = "", finishes_the_command=False):
+    """Trace a planned config and write its tables (one per albedo) to ``outs`` (``finishes_the_command``:
+    then ignore stop signals until the command returns, :func:`_stop_on_signals`); finished units
     are kept in the unit store ``directory`` until the tables are written. A failure or a signal
     says in its one line how many units were kept for --resume; a refusal keeps them all."""
     from . import embree, executors, runner, tables, unit_store
@@ -432,7 +440,7 @@ def _trace(config, plan, outs, directory: Path, options: Options, label: str = "
         store = unit_store.UnitStore.open(directory, plan, options.resume, options.force)
     except (runner.PlanError, unit_store.StoreMismatch) as err:
         raise BadInput(f"{label}{err}") from None
-    with _stop_on_signals() as hold, _progress(plan) as advance:
+    with _stop_on_signals(finishes_the_command) as hold, _progress(plan) as advance:
         try:
             results = runner.run_albedos(config, options.workers, options.threads, advance, options.executor,
                                          options.scheduler, store)

@@ -128,3 +128,34 @@ def test_a_signal_ignored_at_start_stays_ignored(tmp_path):
         assert process.poll() is None, process.communicate()[1]
     finally:
         process.kill()
+
+
+@pytest.mark.parametrize("name", ["SIGINT", "SIGTERM"])
+def test_a_signal_once_the_table_is_written_leaves_a_finished_run_exiting_0(tmp_path, monkeypatch, capsys, name):
+    """Issue 24, defect 8: SIGINT just after "table written to" made a finished run die of it."""
+    import click
+
+    from microsim import tables
+    from microsim.cli import main
+
+    real_echo = click.echo
+
+    def echo_then_signal(message=None, *args, **kwargs):
+        real_echo(message, *args, **kwargs)
+        if str(message).startswith("table written to"):
+            os.kill(os.getpid(), getattr(signal, name))
+            time.sleep(0.1)  # the handler runs here, between bytecodes, if there is one
+
+    def interrupted(signum, frame):  # in this process, a signal the command does not catch interrupts it
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(click, "echo", echo_then_signal)
+    signum = getattr(signal, name)
+    handler = signal.signal(signum, interrupted)
+    try:
+        out = tmp_path / "t.h5"
+        assert main(["run", str(RUN), "--out", str(out), "--paths", "2000"]) == 0
+        assert tables.load(out).arrays["albedo"].shape == (4,)
+        assert signal.getsignal(signum) is interrupted  # the handlers are the caller's again
+    finally:
+        signal.signal(signum, handler)
