@@ -48,11 +48,13 @@ def synthetic(table, exact, rng):
     """``table`` with its BRDF replaced by the cell averages ``exact`` times (1 + NOISE x a normal
     number), and standard errors NOISE x the averages; ``rng`` None: no noise. Noise independent
     from cell to cell is that of a table of countless paths (each path's exit cell ties the cells
-    of a real table; ``fit`` takes that tie from ``paths``)."""
+    of a real table; ``fit`` takes that tie from ``paths``), and an albedo error that is the
+    cells' alone."""
     stderr = NOISE * exact
     noise = rng.standard_normal(exact.shape) if rng is not None else 0.0
-    return dataclasses.replace(table, brdf=exact + stderr * noise, brdf_stderr=stderr,
-                               paths=np.full_like(table.paths, 10**15))
+    brdf, projected = exact + stderr * noise, table.projected_solid_angle
+    return dataclasses.replace(table, brdf=brdf, brdf_stderr=stderr, paths=np.full_like(table.paths, 10**15),
+                               albedo=brdf @ projected, albedo_stderr=np.sqrt(stderr**2 @ projected**2))
 
 
 @pytest.mark.parametrize("name,truth,start", [
