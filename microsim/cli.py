@@ -454,7 +454,7 @@ def _trace(config, plan, outs, directory: Path, options: Options, label: str = "
                 store.clear()
             if refused:
                 raise refused[0]
-        except (embree.EmbreeUnavailable, executors.WorkerFailed) as err:  # in a worker, one line each
+        except (embree.EmbreeUnavailable, executors.WorkerFailed, unit_store.UnitNotSaved) as err:  # one line each
             raise click.ClickException(f"{label}{err}{_kept(store, plan)}") from None
         except (executors.SchedulerUnreachable, runner.PlanError) as err:
             raise BadInput(f"{label}{err}{_kept(store, plan)}") from None

@@ -45,6 +45,11 @@ class StoreMismatch(ValueError):
     """The store cannot be used as asked; the message is one line saying why."""
 
 
+class UnitNotSaved(OSError):
+    """A finished unit could not be written to the store (a full disk, say); one line naming the
+    file, the reason and the space left. Nothing of it is left behind."""
+
+
 def store_path(table: Path) -> Path:
     """Where the units of the run writing ``table`` are kept."""
     return table.with_name(table.name + SUFFIX)
@@ -161,13 +166,21 @@ class UnitStore:
         """Keep a finished unit (durably and atomically: a crash leaves the whole file or none)."""
         path = self._unit_file(unit)
         tmp = path.with_name(f".{path.name}.tmp")
-        with open(tmp, "wb") as handle:
-            np.savez(handle, paths=np.int64(tally.paths), exit_weight=tally.exit_weight, energy=tally.energy,
-                     counts=tally.counts, albedo_scale=tally.albedo_scale,
-                     info=np.frombuffer(json.dumps(_plain(info)).encode(), np.uint8))
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
+        try:
+            with open(tmp, "wb") as handle:
+                np.savez(handle, paths=np.int64(tally.paths), exit_weight=tally.exit_weight, energy=tally.energy,
+                         counts=tally.counts, albedo_scale=tally.albedo_scale,
+                         info=np.frombuffer(json.dumps(_plain(info)).encode(), np.uint8))
+                handle.flush()
+                os.fsync(handle.fileno())
+            os.replace(tmp, path)
+        except OSError as err:
+            tmp.unlink(missing_ok=True)
+            try:
+                free = f", {shutil.disk_usage(self.directory).free / 1e6:.1f} MB free there"
+            except OSError:
+                free = ""
+            raise UnitNotSaved(f"cannot save unit {path.name} in {self.directory}: {err.strerror or err}{free}") from None
 
     def load(self, unit) -> tuple[Tally, dict]:
         """A saved unit's tally and scene info, as they were saved."""

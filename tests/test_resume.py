@@ -252,3 +252,30 @@ def test_a_signal_while_the_tables_are_written_waits_for_them():
     assert events == ["tables written"]
     assert stopped.value.message == "stopped by SIGTERM once its tables were written"
     assert stopped.value.exit_code == 128 + signal.SIGTERM
+
+
+def test_a_full_disk_ends_the_run_in_one_line_keeping_its_units(tmp_path, capsys, monkeypatch):
+    """Issue 24, defect 6: ENOSPC in unit_store.save gave a 61-line traceback and left a .tmp file."""
+    import errno
+
+    import numpy as np
+
+    config = tmp_path / "run.toml"
+    config.write_text(RUN.replace("paths = 2_560_000", "paths = 3200"))
+    out = tmp_path / "t.h5"
+    real_savez, calls = np.savez, []
+
+    def savez_until_full(handle, **arrays):
+        calls.append(1)
+        if len(calls) > 3:
+            handle.write(b"partial")
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        real_savez(handle, **arrays)
+
+    monkeypatch.setattr(unit_store.np, "savez", savez_until_full)
+    assert main(["run", str(config), "--out", str(out)]) == 1
+    lines = capsys.readouterr().err.splitlines()
+    store = unit_store.store_path(out)
+    assert len(lines) == 1 and "No space left on device" in lines[0] and "MB free" in lines[0], lines
+    assert lines[0].endswith(f"; 3 of {UNITS} units kept in {store} (rerun with --resume to finish)"), lines[0]
+    assert not out.exists() and not list(store.glob(".*.tmp")) and len(list(store.glob("r*.npz"))) == 3
