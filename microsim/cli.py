@@ -109,16 +109,21 @@ def _stop_on_signals(finishes_the_command: bool = False):
     for signum, handler in previous.items():
         if handler is not signal.SIG_IGN:
             signal.signal(signum, stop)
+    def restore():
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
     try:
         yield hold
     except BaseException:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
+        restore()
         raise
-    for signum, handler in previous.items():
-        signal.signal(signum, signal.SIG_IGN if finishes_the_command else handler)
     if finishes_the_command:
-        click.get_current_context().call_on_close(lambda: [signal.signal(n, h) for n, h in previous.items()])
+        for signum in previous:
+            signal.signal(signum, signal.SIG_IGN)
+        click.get_current_context().call_on_close(restore)
+    else:
+        restore()
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
