@@ -289,10 +289,13 @@ def load(path: str | Path) -> Table:
             scene = {k: _plain(v) for k, v in h5["scene"].attrs.items()} if "scene" in h5 else None
         except (OSError, RuntimeError) as err:  # damaged metadata above the datasets: links, attributes
             raise TableError(f"HDF5 structure is damaged ({err})") from None
+    if "microsim_version" not in attrs or "config_toml" not in attrs:
+        raise TableError("not a microsim table (no microsim_version and config_toml attributes)")
     if scene is None:
         raise TableError("scene is missing")
     _check(arrays)
     sensor = Sensor.from_ring_counts(arrays["sensor/ring_counts"])
+    _check_values(arrays, sensor)
     return Table(
         path, attrs, scene, arrays["incidence/theta"], arrays["incidence/phi"], sensor,
         arrays["sensor/direction"], arrays["sensor/projected_solid_angle"], arrays["brdf"], arrays["brdf_stderr"],
@@ -349,6 +352,44 @@ def _check(arrays: dict) -> None:
                 raise TableError(f"{name} holds NaN in {nan} of {values.size} values")
             if infinite := np.count_nonzero(np.isinf(values)):
                 raise TableError(f"{name} holds infinity in {infinite} of {values.size} values")
+
+
+#: how far stored cell bounds may lie from those the ring counts give (radians: numpy's SIMD
+#: kernels move them by a few ulps from one CPU to another)
+BOUNDS_TOLERANCE = 1e-9
+
+
+def _check_values(arrays: dict, sensor: Sensor) -> None:
+    """Raise TableError unless the values are those a run can give (a table edited by another
+    program): incidences above the horizon, errors, BRDF values, albedos and path counts not
+    negative, and cell bounds that are the ones of the sensor the ring counts describe (the
+    sensor compare and fit average over is rebuilt from the counts)."""
+    theta = arrays["incidence/theta"]
+    if np.any((theta < 0) | (theta >= np.pi / 2)):
+        bad = theta[(theta < 0) | (theta >= np.pi / 2)][0]
+        raise TableError(f"incidence/theta holds {bad:g} rad ({np.degrees(bad):g} deg), outside [0, pi/2)")
+    phi = arrays["incidence/phi"]
+    if np.any(np.abs(phi) > 2 * np.pi):
+        raise TableError(f"incidence/phi holds {phi[np.abs(phi) > 2 * np.pi][0]:g} rad, outside [-2 pi, 2 pi]")
+    for name, values in arrays.items():
+        if values.dtype.kind in "iuf" and _never_negative(name) and (negative := np.count_nonzero(values < 0)):
+            raise TableError(f"{name} holds a negative value in {negative} of {values.size} values")
+    if np.any(arrays["paths"] < 1):
+        raise TableError("paths holds a count below 1")
+    for name, bounds in zip(("theta_lo", "theta_hi", "phi_lo", "phi_hi"), sensor.cell_bounds()):
+        stored = arrays[f"sensor/{name}"]
+        if not np.allclose(stored, bounds, rtol=0.0, atol=BOUNDS_TOLERANCE):
+            cell = int(np.argmax(np.abs(stored - bounds)))
+            raise TableError(f"sensor/{name} disagrees with sensor/ring_counts (cell {cell}: {stored[cell]:.9g} rad "
+                             f"stored, {bounds[cell]:.9g} rad from the ring counts)")
+
+
+def _never_negative(name: str) -> bool:
+    """Datasets a run never makes negative: standard errors, BRDF values, albedos, energies
+    (the balance included), the sensor's solid angles and the event counts."""
+    leaf = name.rsplit("/", 1)[-1]
+    return (name.endswith("_stderr") or leaf.startswith(("brdf", "albedo")) or name.startswith("energy/")
+            or leaf in ("solid_angle", "projected_solid_angle") or name.startswith("diagnostics/"))
 
 
 def _plain(value):

@@ -54,12 +54,28 @@ def replace_brdf_by_wrong_shape(h5):
     h5["brdf"] = np.zeros((n_i, 7))
 
 
+def edit(name, change):
+    """A damage that edits dataset ``name`` as another program would: ``change(values)`` in
+    place, its digest made to agree (only the values can tell)."""
+    def damage(h5):
+        values = h5[name][()]
+        change(values)
+        del h5[name]
+        h5.create_dataset(name, data=values)
+        h5[name].attrs["sha256"] = hashlib.sha256(values.tobytes()).hexdigest()
+    return damage
+
+
 def write_nan_into_a_cell(h5):
     """NaN in a table as if it had been written so: its digest agrees."""
-    brdf = h5["brdf"][()]
-    brdf[1, 3] = np.nan
-    h5["brdf"][...] = brdf
-    h5["brdf"].attrs["sha256"] = hashlib.sha256(brdf.tobytes()).hexdigest()
+    edit("brdf", lambda brdf: brdf.__setitem__((1, 3), np.nan))(h5)
+
+
+def move_a_cell_between_rings(h5):
+    """Ring counts of as many cells, not those of the stored bounds: the second ring loses a cell
+    to the third."""
+    edit("sensor/ring_counts", lambda counts: (counts.__setitem__(1, counts[1] - 1),
+                                               counts.__setitem__(2, counts[2] + 1)))(h5)
 
 
 @pytest.mark.parametrize("damage, expected", [
@@ -67,11 +83,21 @@ def write_nan_into_a_cell(h5):
     (lambda h5: h5.__delitem__("albedo_order"), "albedo_order is missing"),
     (replace_brdf_by_wrong_shape, "brdf has shape (2, 7), expected (2, {cells}) (incidences x cells)"),
     (write_nan_into_a_cell, "brdf holds NaN in 1 of {values} values"),
-], ids=["no brdf_order_stderr", "no albedo_order", "brdf of the wrong shape", "NaN in brdf"])
+    # issue 24, defect 12: values no run gives, edited in by another program
+    (edit("incidence/theta", lambda theta: theta.__setitem__(1, 10.0)),
+     "incidence/theta holds 10 rad (572.958 deg), outside [0, pi/2)"),
+    (edit("brdf_stderr", lambda e: e.__setitem__((0, 2), -e[0, 2])),
+     "brdf_stderr holds a negative value in 1 of {values} values"),
+    (edit("albedo", lambda a: a.__setitem__(0, -0.5)), "albedo holds a negative value in 1 of 2 values"),
+    (move_a_cell_between_rings, "sensor/theta_lo disagrees with sensor/ring_counts (cell 7:"),
+    (lambda h5: h5.attrs.__delitem__("microsim_version"),
+     "not a microsim table (no microsim_version and config_toml attributes)"),
+], ids=["no brdf_order_stderr", "no albedo_order", "brdf of the wrong shape", "NaN in brdf", "theta beyond pi/2",
+        "negative brdf_stderr", "negative albedo", "ring counts against bounds", "no microsim_version"])
 def test_a_damaged_table_gives_one_line_naming_the_dataset(good_table, tmp_path, capsys, damage, expected):
     cells = tables.load(good_table).sensor.n_cells
     path = damaged_copy(good_table, tmp_path, damage)
-    assert compare_error(path, capsys).endswith(expected.format(cells=cells, values=2 * cells))
+    assert expected.format(cells=cells, values=2 * cells) in compare_error(path, capsys)
 
 
 def brdf_chunk(good_table):
@@ -150,3 +176,11 @@ def test_nan_from_the_model_is_an_error_naming_it(good_table):
     cells = table.brdf.size
     with pytest.raises(ValueError, match=rf"^model NaNModel\(\) is NaN or infinite in {cells} of {cells} cells$"):
         compare.compare(table, NaNModel(), "1")
+
+
+def test_a_foreign_hdf5_file_is_not_a_microsim_table(tmp_path, capsys):
+    """Issue 24, defect 12: it was reported as "scene is missing"."""
+    path = tmp_path / "foreign.h5"
+    with h5py.File(path, "w") as h5:
+        h5["data"] = np.arange(3.0)
+    assert compare_error(path, capsys).endswith("not a microsim table (no microsim_version and config_toml attributes)")
