@@ -24,7 +24,7 @@ and very tall (beta = 5) grains, in units of the local semi-axes. The icosphere 
 projected onto the ellipsoid of the mesh's vertex radius, as for meshed spheres.
 
 Tile. A square of side L, periodic in x and y. The default is
-L = max(TILE_FACTOR (tan(theta_max) + tan(GRAZING_DEG) + 4 a), FOOTPRINTS x 2 a), with
+L = max(TILE_FACTOR (tan(theta_max) + tan(GRAZING_DEG) + 4 a), FOOTPRINTS x 2 a, sqrt(10 / rho)), with
 a = max(1/beta_x, 1/beta_y) the largest lateral semi-axis and theta_max the largest incidence of
 the run (at least GRAZING_DEG = 86 deg). A ray entering the layer (z <= 1) at theta_i travels at
 most tan(theta_i) horizontally before it reaches the base, and one leaving at theta_o at most
@@ -38,7 +38,9 @@ estimates are skewed, and the larger the tile the closer their mean is to normal
 theta_i = 86 deg (tau0 = 0.6, beta = 0.5, conductor grains, order 1, 64 realizations, 100
 cells; ``benchmarks/micrograins.py`` part c): chi^2 per cell against the model 2.25 at L = 32
 (below the no-ghost reach, 36.6), 1.33 at the default 73.2, 0.68 at 146. The footprint term
-keeps FOOTPRINTS grain widths in a tile of very flat grains. The reach uses theta_max up to
+keeps FOOTPRINTS grain widths in a tile of very flat grains, and the last term 10 grains expected
+in a sparse field (tau0 below about 0.03: a tile of fewer is often empty; a given tile that
+expects fewer is refused). The reach uses theta_max up to
 MAX_REACH_DEG = 89.5 deg, and the default tile never holds more than MAX_DEFAULT_GRAINS grains
 (dense fields of tall grains at the most grazing incidences: light does not get far in them;
 ``tile_grain_budget`` in the table says when the budget set the tile).
@@ -71,8 +73,8 @@ from microsim.scene import Scene, SceneBuilder
 from microsim.schema import Section
 from microsim.shapes import Shapes
 
-from .poisson_spheres import EXACT_SPHERE_BYTES, MAX_SUBDIVISIONS, TRIANGLE_BYTES, is_exact, level_for, \
-    meshed_on_embreex, periodic_images, unit_icosphere
+from .poisson_spheres import EXACT_SPHERE_BYTES, MAX_SUBDIVISIONS, MIN_EXPECTED_OBJECTS, TRIANGLE_BYTES, is_exact, \
+    level_for, meshed_on_embreex, periodic_images, unit_icosphere
 
 KIND = "micrograins"
 INTEGRATOR = "surface"
@@ -129,6 +131,12 @@ def check(config) -> None:
     scene = config.scene
     if scene.subdivisions is not None and scene.mesh_error is not None:
         raise ValueError("scene.mesh_error: give either subdivisions or mesh_error, not both")
+    if scene.tile is not None:
+        density = grain_density(scene.tau0, *scene.betas)
+        if (expected := density * scene.tile**2) < MIN_EXPECTED_OBJECTS:
+            raise ValueError(f"scene.tile = {scene.tile:g}: {expected:.3g} grains expected a tile (tau0 {scene.tau0:g}); "
+                             f"accepted: at least {MIN_EXPECTED_OBJECTS} (a tile of "
+                             f"{math.sqrt(MIN_EXPECTED_OBJECTS / density):.4g} or more)")
 
 
 def for_backend(config, backend: str):
@@ -142,7 +150,7 @@ def default_tile(beta_x: float, beta_y: float, theta_max_deg: float, density: fl
     a = max(1.0 / beta_x, 1.0 / beta_y)
     angle = min(max(theta_max_deg, GRAZING_DEG), MAX_REACH_DEG)
     reach = math.tan(math.radians(angle)) + math.tan(math.radians(GRAZING_DEG))
-    tile = max(TILE_FACTOR * (reach + 4.0 * a), FOOTPRINTS * 2.0 * a)
+    tile = max(TILE_FACTOR * (reach + 4.0 * a), FOOTPRINTS * 2.0 * a, math.sqrt(MIN_EXPECTED_OBJECTS / density))
     budget = math.sqrt(MAX_DEFAULT_GRAINS / density)
     if tile > budget and budget > FOOTPRINTS * 2.0 * a:
         return budget, True

@@ -103,10 +103,25 @@ class Config(Section):
     mesh_error: float | None = Field(None, gt=0.0, le=0.5, description="largest mesh-to-sphere distance, in radii")
 
 
+#: a realization expects at least this many spheres (or grains): a Poisson count of 10 is 0 with
+#: probability exp(-10) = 4.5e-5. A tile of 0.22 grains left 3 of 4 realizations empty, and an
+#: albedo of 0.119 +- 0.119 (issue 24)
+MIN_EXPECTED_OBJECTS = 10
+
+
 def check(config) -> None:
     scene = config.scene
     if scene.subdivisions is not None and scene.mesh_error is not None:
         raise ValueError("scene.mesh_error: give either subdivisions or mesh_error, not both")
+    if scene.tile is not None or scene.depth is not None:
+        resolved = resolve(config)
+        if resolved["expected_spheres"] < MIN_EXPECTED_OBJECTS:
+            given = ", ".join(f"scene.{key} = {resolved[key]:g}" for key in ("tile", "depth")
+                              if getattr(scene, key) is not None)
+            volume = MIN_EXPECTED_OBJECTS / resolved["number_density"]
+            raise ValueError(f"{given}: {resolved['expected_spheres']:.3g} spheres expected a realization; accepted: "
+                             f"at least {MIN_EXPECTED_OBJECTS} (tile^2 x depth >= {volume:.4g} radii^3 at "
+                             f"volume_fraction {scene.volume_fraction:g})")
 
 
 def for_backend(config, backend: str):

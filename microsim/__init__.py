@@ -1,8 +1,7 @@
 """microsim: ground-truth BRDF tables from explicit random microgeometry."""
 
-from . import inlining, kernel_cache
+from . import numba_setup
 
 __version__ = "0.1.0"
 
-kernel_cache.install()
-inlining.install()
+numba_setup.install_when_numba_loads()

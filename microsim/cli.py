@@ -16,6 +16,7 @@ import csv
 import math
 import os
 import re
+import shutil
 import signal
 import sys
 import threading
@@ -25,10 +26,11 @@ from pathlib import Path
 
 import click
 
-from . import config as config_module
-from . import sweep
 from .compare import ORDER_ROWS
 from .integrators.records import RESULT_ALL_ORDERS
+
+# The modules of the work itself (config and geometry, numba, h5py, the models) are imported by
+# each command as it needs them: --help, `models` and a refused argument answer without them.
 
 EXIT_BAD_INPUT = 2
 #: ``--executor`` choices: the keys of microsim.runner.EXECUTORS (named here so that --help
@@ -38,6 +40,10 @@ EXECUTORS = ("local", "dask")
 SCHEDULER_ADDRESS = re.compile(r"^((tcp|tls|ws|wss)://)?(?P<host>[A-Za-z0-9._\-\[\]:]+):(?P<port>\d{1,5})$")
 #: threads a process may run (Python threads, each tracing in a numba call without the GIL)
 MAX_THREADS = 256
+
+
+MODEL_HELP = ("analytic model: a name `microsim models` lists, or your own as module:Name or path.py:Name (a "
+              "BRDFModel subclass, or a function f(wi, wo, **params) in 1/sr)")
 
 
 class BadInput(click.ClickException):
@@ -154,7 +160,8 @@ def cli():
                                                       "(with --executor dask)")
 def run(config_path, out, workers, threads, backend, paths, seed, force, resume, executor, scheduler):
     """Trace CONFIG.toml and write its HDF5 table."""
-    from . import runner, unit_store
+    from . import config as config_module
+    from . import runner, sweep, unit_store
 
     overrides = {}
     if paths is not None:
@@ -188,12 +195,11 @@ def run(config_path, out, workers, threads, backend, paths, seed, force, resume,
     outs = [out.with_name(f"{out.stem}_albedo{albedo_text(c)}{out.suffix}") for c in plan.albedos] or [out]
     for path in outs:
         _refuse_input(path, config_path)
-    total = plan.paths * plan.n_incidences
-    results = _trace(config, plan, outs, unit_store.store_path(out), options, finishes_the_command=True)
+    results, compiling = _trace(config, plan, outs, unit_store.store_path(out), options, finishes_the_command=True)
     summaries = [_albedo_summary(plan, result) for result in results]
-    traced = total * results[0].units_traced / len(plan.units)
-    rate = traced / results[0].wall_time
-    timing = (f"{results[0].wall_time:.1f} s, {rate:.3g} paths/s, {_where(plan, options)}, backend {plan.backend}")
+    traced = plan.paths * plan.n_incidences * results[0].units_traced / len(plan.units)
+    timing = (f"{results[0].wall_time:.1f} s, {traced / results[0].wall_time:.3g} paths/s, {_where(plan, options)}, "
+              f"backend {plan.backend}")
     if results[0].units_resumed:
         timing += f"; {results[0].units_resumed} of {len(plan.units)} units resumed, {results[0].units_traced} traced"
     if len(results) == 1:
@@ -202,14 +208,14 @@ def run(config_path, out, workers, threads, backend, paths, seed, force, resume,
         for path, result, summary in zip(outs, results, summaries):
             click.echo(f"material albedo {result.albedo_value:g}: albedo {summary} -> {path}")
         click.echo(f"{len(results)} albedos from one run of {plan.paths:,} paths an incidence: {timing}")
-    if plan.backend_note:
-        click.echo(f"note: {plan.backend_note}")
+    for line in _run_notes(config, plan, results, compiling):
+        click.echo(line)
     click.echo(f"table written to {out}" if len(outs) == 1 else f"{len(outs)} tables written")
 
 
 @cli.command()
 @click.argument("table_path", metavar="TABLE.h5", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--model", "model_name", required=True, help="analytic model (see `microsim models`)")
+@click.option("--model", "model_name", required=True, help=MODEL_HELP)
 @click.option("--param", "params", multiple=True, metavar="KEY=VALUE", help="model parameter, repeatable")
 @click.option("--order", type=click.Choice(list(ORDER_ROWS)), default="all", show_default=True,
               help="compare with one scattering order of the table, orders 1 and 2 together (1+2, the "
@@ -221,25 +227,27 @@ def run(config_path, out, workers, threads, backend, paths, seed, force, resume,
 def compare(table_path, model_name, params, order, as_json, plot_dir):
     """Average a model over the cells of TABLE.h5 and report how far it is from the simulation."""
     from . import compare as compare_module
-    from . import models
 
     values = _model_parameters(params)
     _check_plot_dir(plot_dir)
-    try:
-        model = models.create(model_name, **values)
-    except ValueError as err:
-        raise BadInput(f"--model {model_name}: {err}" if "unknown model" not in str(err) else f"--model: {err}") from None
+    cls = _model_class(model_name)
+    with _user_model_errors(model_name):
+        try:
+            model = cls(**values)
+        except ValueError as err:
+            raise BadInput(f"--model {model_name}: {err}") from None
     table = _load_table(table_path)
-    try:
-        result = compare_module.compare(table, model, order)
-    except ValueError as err:  # NaN or infinity in the model's values (the message names it)
-        raise BadInput(str(err)) from None
+    with _user_model_errors(model_name):
+        try:
+            result = compare_module.compare(table, model, order)
+        except ValueError as err:  # NaN or infinity in the model's values (the message names it)
+            raise BadInput(str(err)) from None
     _report(result, table, f"{model!r} vs {table_path}", as_json, plot_dir, result.as_dict())
 
 
 @cli.command()
 @click.argument("table_path", metavar="TABLE.h5", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--model", "model_name", required=True, help="analytic model (see `microsim models`)")
+@click.option("--model", "model_name", required=True, help=MODEL_HELP)
 @click.option("--free", "free", multiple=True, metavar="KEY", help="parameter to fit, repeatable")
 @click.option("--param", "params", multiple=True, metavar="KEY=VALUE",
               help="fixed model parameter, or the starting value of a free one; repeatable")
@@ -252,22 +260,81 @@ def fit(table_path, model_name, free, params, order, as_json, plot_dir):
     """Fit model parameters to TABLE.h5 (weighted least squares on cell averages); report them with
     standard errors, chi-square per degree of freedom and compare's figures for the best fit."""
     from . import fit as fit_module
-    from . import models
 
-    if model_name not in models.available():
-        raise BadInput(f"--model: unknown model {model_name!r}; available: {', '.join(models.available())}")
+    cls = _model_class(model_name)
     values = _model_parameters(params)
     _check_plot_dir(plot_dir)
     table = _load_table(table_path)
-    try:
-        result = fit_module.fit(table, model_name, list(free), values, order)
-    except ValueError as err:
-        message = " ".join(str(err).split())
-        raise BadInput(message if message.startswith(("--", "table")) else f"--model {model_name}: {message}") from None
+    with _user_model_errors(model_name), _fit_status(cls.name) as status:
+        try:
+            result = fit_module.fit(table, cls, list(free), values, order, progress=status)
+        except ValueError as err:
+            message = " ".join(str(err).split())
+            raise BadInput(message if message.startswith(("--", "table")) else f"--model {model_name}: {message}") from None
     fitted = ", ".join(f"{k} = {v:.6g} +- {e:.2g}" for k, (v, e) in result.free.items())
-    header = (f"fit of {model_name} to {table_path}: {fitted}; chi^2 / dof = {result.chi2_per_dof:.3g} "
-              f"({result.dof} dof, {result.evaluations} evaluations)\nbest fit")
+    header = (f"fit of {cls.name} to {table_path}: {fitted}; chi^2 / dof = {result.chi2_per_dof:.3g} "
+              f"({result.dof:.1f} dof, {result.evaluations} evaluations)\nbest fit")
     _report(result.comparison, table, header, as_json, plot_dir, result.as_dict())
+
+
+@contextlib.contextmanager
+def _fit_status(name: str):
+    """On a terminal, a status line that follows a fit (its evaluations, the parameters it tries,
+    the time so far); yields the fit's ``progress`` callback (None elsewhere)."""
+    if not sys.stderr.isatty():
+        yield None
+        return
+    from rich.console import Console
+
+    from .interrupts import blocked_in_new_threads
+
+    start = time.monotonic()
+    with blocked_in_new_threads():  # the status line's refresh thread
+        status = Console(stderr=True).status(f"fitting {name}")
+        status.start()
+
+    def progress(evaluations, values):
+        tried = ", ".join(f"{key} = {value:.5g}" for key, value in values.items())
+        status.update(f"fitting {name}: {evaluations} evaluations, at {tried} ({time.monotonic() - start:.0f} s)")
+
+    try:
+        yield progress
+    finally:
+        status.stop()
+
+
+def _model_class(text: str):
+    """The model class ``--model`` names (a registered model, module:Name or path.py:Name), or
+    BadInput in one line."""
+    from .models import user_models
+
+    try:
+        return user_models.load(text)
+    except ValueError as err:  # an unknown name, or a user model that does not load
+        message = str(err)
+        raise BadInput(f"--model: {message}" if message.startswith("unknown model") else f"--model {text}: {message}") \
+            from None
+
+
+@contextlib.contextmanager
+def _user_model_errors(text: str):
+    """A user's model (``--model`` module:Name or path.py:Name) that raises while it is
+    evaluated ends in one line naming it, as a bad input; the registered models' errors are
+    microsim's own and keep their traceback."""
+    if ":" not in text:
+        yield
+        return
+    try:
+        yield
+    except click.ClickException:
+        raise
+    except Exception as err:  # noqa: BLE001 - the user's code
+        raise BadInput(f"--model {text}: evaluating it raised {type(err).__name__}: {' '.join(str(err).split())}") \
+            from None
+
+
+#: compare's verdict, by its JSON value
+VERDICTS = {True: "consistent", False: "inconsistent", None: "n/a"}
 
 
 def _model_parameters(params) -> dict:
@@ -318,22 +385,28 @@ def _report(result, table, title, as_json, plot_dir, json_object) -> None:
     if plot_dir is not None:
         from . import plots
 
-        written = plots.write_all(result, table.sensor, plot_dir)
+        written = plots.write_all(result, table.sensor, plot_dir, table.path.name)
     if as_json:
         click.echo(json.dumps(json_object))
     else:
         click.echo(f"{title} (order {result.order}; cells with signal: table > "
-                   f"{compare_module.SIGNAL_TO_NOISE:g} standard errors)")
-        click.echo(f"{'theta_i':>8} {'phi_i':>6} {'cells':>6} {'med|rel|':>9} {'rel rmse':>9} {'max|z|':>8} "
-                   f"{'albedo model':>13} {'albedo sim':>16}")
-        for row in result.as_dict()["per_incidence"]:
-            click.echo(f"{row['theta_i_deg']:8.1f} {row['phi_i_deg']:6.1f} {row['cells_with_signal']:6d} "
-                       f"{row['median_abs_rel_err']:9.4f} "
-                       f"{row['rel_rmse']:9.4f} {row['max_abs_z']:8.2f} {row['albedo_model']:13.4f} "
-                       f"{row['albedo_sim']:9.4f}+-{row['albedo_sim_stderr']:.4f}")
-        o = result.as_dict()["overall"]
-        click.echo(f"{'overall':>8} {'':>6} {o['cells_with_signal']:6d} {o['median_abs_rel_err']:9.4f} {o['rel_rmse']:9.4f} "
-                   f"{o['max_abs_z']:8.2f}")
+                   f"{compare_module.SIGNAL_TO_NOISE:g} standard errors; chi^2 per cell: 1 expected for the model "
+                   f"of the table, {100 * (1 - compare_module.CHI2_OUTSIDE):g} % two-sided bounds; consistent: "
+                   "within them, and the albedo's z^2 within its bound)")
+        click.echo(f"{'theta_i':>8} {'phi_i':>6} {'cells':>6} {'med|rel|':>9} {'rel rmse':>9} {'max|z|':>7} "
+                   f"{'chi2/cell':>9} {'bounds':>14} {'albedo z^2':>10} {'bound':>6}  {'verdict':<12} {'albedo model':>12} "
+                   f"{'albedo sim':>16}")
+        rows = result.as_dict()
+        for row in [*rows["per_incidence"], rows["overall"]]:
+            where = (f"{row['theta_i_deg']:8.1f} {row['phi_i_deg']:6.1f}" if "theta_i_deg" in row
+                     else f"{'overall':>8} {'':>6}")
+            low, high = row["chi2_bounds"]
+            albedos = (f" {row['albedo_model']:12.4f} {row['albedo_sim']:9.4f}+-{row['albedo_sim_stderr']:.4f}"
+                       if "albedo_sim_stderr" in row else "")
+            click.echo(f"{where} {row['cells_with_signal']:6d} {row['median_abs_rel_err']:9.4f} {row['rel_rmse']:9.4f} "
+                       f"{row['max_abs_z']:7.2f} {row['chi2_per_cell']:9.3f} {f'[{low:.3f}, {high:.3f}]':>14} "
+                       f"{row['albedo_z2']:10.3g} {row['albedo_z2_bound']:6.2f}  "
+                       f"{VERDICTS[row['consistent']]:<12}{albedos}")
     if plot_dir is not None and not as_json:
         click.echo(f"{len(written)} figures written to {plot_dir}")
 
@@ -360,7 +433,7 @@ def _run_sweep(points, out_dir: Path, options: Options, config_path: Path) -> No
     and ``index.csv`` (rewritten as each point ends: values, table, status, albedo per incidence).
     With --resume, a point whose table is there (made from the same config) is kept as it is,
     and the point that was interrupted resumes from its units."""
-    from . import runner, unit_store
+    from . import runner, sweep, unit_store
 
     for point in points:
         _refuse_input(out_dir / f"{point.name}.h5", config_path)
@@ -400,7 +473,7 @@ def _run_sweep(points, out_dir: Path, options: Options, config_path: Path) -> No
             continue
         path = out_dir / row["table"]
         result = _trace(point.config, plan, [path], unit_store.store_path(path), options,
-                        label=f"sweep point {point.name}: ", finishes_the_command=point is points[-1])[0]
+                        label=f"sweep point {point.name}: ", finishes_the_command=point is points[-1])[0][0]
         _index_albedos(row, plan, [a.mean[RESULT_ALL_ORDERS] for a in result.albedo])
         _write_index(out_dir, rows)
         click.echo(f"{point.name}: albedo {_albedo_summary(plan, result)} | {result.wall_time:.1f} s")
@@ -434,44 +507,70 @@ def _trace(config, plan, outs, directory: Path, options: Options, label: str = "
     """Trace a planned config and write its tables (one per albedo) to ``outs`` (``finishes_the_command``:
     then ignore stop signals until the command returns, :func:`_stop_on_signals`); finished units
     are kept in the unit store ``directory`` until the tables are written. A failure or a signal
-    says in its one line how many units were kept for --resume; a refusal keeps them all."""
+    says in its one line how many units were kept for --resume; a refusal keeps them all.
+
+    The tracer is compiled first (said on the progress line while it lasts), before the store is
+    touched: a signal then ends the command at once, with nothing to clean up. Returns the
+    results and the seconds of compiling, which the caller reports apart from the tracing."""
     from . import embree, executors, runner, tables, unit_store
+    from .compile_watch import CompileWatch
 
     for path in outs:
         _check_writable(path, options.force)
     try:
         if options.scheduler is None:  # before the store is touched: a refusal must not cost a unit
             runner.check_memory(plan, plan.build_sensor(), options.workers, spawned=options.executor == "dask")
-        store = unit_store.UnitStore.open(directory, plan, options.resume, options.force)
+        kept = unit_store.UnitStore.check(directory, plan, options.resume, options.force).saved_units()
     except (runner.PlanError, unit_store.StoreMismatch) as err:
         raise BadInput(f"{label}{err}") from None
-    with _stop_on_signals(finishes_the_command) as hold, _progress(plan) as advance:
+    progress = _Progress(plan, plan.tracer_class.COMPILE_SECONDS[plan.backend])
+    with progress, CompileWatch(progress.compiling) as watch:
+        if options.scheduler is None and not (options.resume and len(kept) == len(plan.units)):
+            runner.compile_tracer(plan)
         try:
-            results = runner.run_albedos(config, options.workers, options.threads, advance, options.executor,
-                                         options.scheduler, store)
-            with hold():
-                refused = []  # a table whose name was taken meanwhile is kept under a fresh name: write them all
-                for path, result in zip(outs, results):
-                    try:
-                        tables.write(path, result, config, overwrite=options.force)
-                    except tables.TableExists as err:
-                        refused.append(err)
-                store.clear()
-            if refused:
-                raise refused[0]
-        except (embree.EmbreeUnavailable, executors.WorkerFailed, unit_store.UnitNotSaved) as err:  # one line each
-            raise click.ClickException(f"{label}{err}{_kept(store, plan)}") from None
-        except (executors.SchedulerUnreachable, runner.PlanError) as err:
-            raise BadInput(f"{label}{err}{_kept(store, plan)}") from None
-        except tables.TableExists as err:
-            raise BadInput(f"--out: {err}") from None
-        except Stopped as stop:
-            if store.directory.exists():
-                stop.add_note(_kept(store, plan))
-            raise
-        finally:
-            store.release()
-    return results
+            store = unit_store.UnitStore.open(directory, plan, options.resume, options.force)
+        except unit_store.StoreMismatch as err:
+            raise BadInput(f"{label}{err}") from None
+        with _stop_on_signals(finishes_the_command) as hold:
+            try:
+                progress.begin(watch)
+                results = runner.run_albedos(config, options.workers, options.threads, progress.advance,
+                                             options.executor, options.scheduler, store)
+                with hold():
+                    refused = []  # a table whose name was taken meanwhile is kept under a fresh name: write them all
+                    for path, result in zip(outs, results):
+                        try:
+                            tables.write(path, result, config, overwrite=options.force)
+                        except tables.TableExists as err:
+                            refused.append(err)
+                        except OSError as err:  # a full disk: the units stay for --resume
+                            raise click.ClickException(f"{label}cannot write the table {path}: "
+                                                       f"{err.strerror or err}{_free_space(path)}"
+                                                       f"{_kept(store, plan)}") from None
+                    store.clear()
+                if refused:
+                    raise refused[0]
+            except (embree.EmbreeUnavailable, executors.WorkerFailed, unit_store.UnitNotSaved) as err:  # one line each
+                raise click.ClickException(f"{label}{err}{_kept(store, plan)}") from None
+            except (executors.SchedulerUnreachable, runner.PlanError) as err:
+                raise BadInput(f"{label}{err}{_kept(store, plan)}") from None
+            except tables.TableExists as err:
+                raise BadInput(f"--out: {err}") from None
+            except Stopped as stop:
+                if store.directory.exists():
+                    stop.add_note(_kept(store, plan))
+                raise
+            finally:
+                store.release()
+    return results, watch.seconds
+
+
+def _free_space(path: Path) -> str:
+    """", N MB free there" of the file system of ``path``'s directory ("" if it cannot be read)."""
+    try:
+        return f", {shutil.disk_usage(path.parent if str(path.parent) else '.').free / 1e6:.1f} MB free there"
+    except OSError:
+        return ""
 
 
 def _kept(store, plan) -> str:
@@ -481,6 +580,51 @@ def _kept(store, plan) -> str:
         store.clear()
         return ""
     return f"; {saved} of {len(plan.units)} units kept in {store.directory} (rerun with --resume to finish)"
+
+
+#: compiling shorter than this is not worth a line
+COMPILE_NOTE_SECONDS = 0.5
+
+
+def _run_notes(config, plan, results, compiling: float) -> list[str]:
+    """The lines after a run's albedos: compiling, paths rounded up, energy that left the
+    albedo beyond its error, the backend's substitutions."""
+    notes = []
+    if compiling >= COMPILE_NOTE_SECONDS:
+        notes.append(f"compiled the tracer in {compiling:.1f} s (not in the time above; once for this machine and "
+                     "these sources, then loaded from numba's cache)")
+    if plan.paths != config.run.paths:
+        notes.append(f"paths: {plan.paths:,} an incidence traced for the {config.run.paths:,} asked: "
+                     f"{plan.realizations} realizations of {plan.paths_per_realization:,} (run.paths rounded up to a "
+                     "multiple of run.realizations)")
+    for result in results:
+        notes.extend(_energy_notes(plan, result))
+    if plan.backend_note:
+        notes.append(f"note: {plan.backend_note}")
+    return notes
+
+
+#: why energy leaves a run without reaching the sensor, by energy/ dataset
+ENERGY_CAUSES = {"transmitted": "left through the bottom of the scene (a deeper scene, or a base, keeps it)",
+                 "truncated": "cut when paths reached run.max_order or the tracer's limit of interactions"}
+
+
+def _energy_notes(plan, result) -> list[str]:
+    """One line for each kind of lost energy (transmitted, truncated) that exceeds the albedo's
+    standard error at some incidence: there the albedo is short of the scene's by more than
+    its noise (the table's energy/ datasets hold every incidence)."""
+    from .integrators.records import ENERGY_NAMES
+
+    lines = []
+    for name, cause in ENERGY_CAUSES.items():
+        j = ENERGY_NAMES.index(name)
+        lost = [(t, energy.mean[j]) for t, energy, albedo in zip(plan.theta_i, result.energy, result.albedo)
+                if energy.mean[j] > albedo.stderr[RESULT_ALL_ORDERS]]
+        if lost:
+            where = ", ".join(f"{math.degrees(t):g}deg {value:.4f}" for t, value in lost)
+            albedo = f"material albedo {result.albedo_value:g}: " if result.albedo_value is not None else ""
+            lines.append(f"{albedo}energy {name}, beyond the albedo's standard error: {where} ({cause})")
+    return lines
 
 
 def _where(plan, options: Options) -> str:
@@ -514,6 +658,8 @@ def _albedo_summary(plan, result) -> str:
 
 def _write_index(out_dir: Path, rows) -> None:
     """index.csv of a sweep, replaced atomically."""
+    from . import sweep
+
     columns = list(dict.fromkeys(key for row in rows for key in row))
     tmp = out_dir / f".{sweep.INDEX}.tmp"
     with open(tmp, "w", newline="") as handle:
@@ -547,42 +693,62 @@ def _check_writable(out: Path, force: bool) -> None:
         raise BadInput(f"--out: directory {parent} is not writable")
 
 
-class _progress:
-    """A rich progress bar on a terminal, nothing otherwise; yields ``advance(unit, paths, resumed)``.
+class _Progress:
+    """A rich progress line on a terminal, nothing otherwise.
 
-    It counts units (realization x incidence) and paths per incidence, as ``--paths`` does, and
-    its time left is the mean rate of the units traced since the start applied to what is left
-    (steadier than a recent-rate estimate when units end in bursts, as they do with workers;
-    units taken from a resumed run's store count as done, not in the rate)."""
+    While numba compiles the tracer it says so, with the time that takes here
+    (``COMPILE_SECONDS`` of the tracer class); then it counts units (realization x incidence) and
+    paths per incidence, as ``--paths`` does. Its time left is the mean rate of the units traced
+    since tracing began, without the seconds spent compiling (``watch``), applied to what is
+    left (steadier than a recent rate when units end in bursts, as they do with workers; units
+    taken from a resumed run's store count as done, not in the rate)."""
 
-    def __init__(self, plan):
-        self.plan = plan
-        self.bar = None
+    def __init__(self, plan, compile_seconds: float):
+        self.plan, self.compile_seconds = plan, compile_seconds
+        self.bar = self.task = self.watch = self.start = None
+        self.done = self.traced = 0
 
     def __enter__(self):
-        if not sys.stderr.isatty():
-            return lambda unit, paths, resumed: None
-        from rich.console import Console
-        from rich.progress import BarColumn, Progress, TextColumn
+        if sys.stderr.isatty():
+            from rich.console import Console
+            from rich.progress import BarColumn, Progress, TextColumn
 
-        plan, start = self.plan, time.monotonic()
-        self.bar = Progress(TextColumn("tracing"), BarColumn(), TextColumn("{task.fields[status]}"),
-                            console=Console(stderr=True), transient=True)
-        self.bar.start()
-        units = len(plan.units)
-        task = self.bar.add_task("trace", total=units, status=f"0/{units} units")
-        counts = {"done": 0, "traced": 0}
+            from .interrupts import blocked_in_new_threads
 
-        def advance(unit, paths, from_store):
-            self.bar.advance(task, 1)
-            counts["done"] += 1
-            counts["traced"] += not from_store
-            done, traced = counts["done"], counts["traced"]
-            left = f"{(time.monotonic() - start) * (units - done) / traced:.0f} s left" if traced else "starting"
-            per_incidence = done * plan.paths_per_realization // plan.n_incidences
-            self.bar.update(task, status=f"{done}/{units} units, {per_incidence:,} of {plan.paths:,} paths per "
-                                         f"incidence, {left}")
-        return advance
+            self.bar = Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.fields[status]}"),
+                                console=Console(stderr=True), transient=True)
+            with blocked_in_new_threads():  # its refresh thread
+                self.bar.start()
+            units = len(self.plan.units)
+            self.task = self.bar.add_task("tracing", total=units, status=f"0/{units} units")
+        return self
+
+    def compiling(self) -> None:
+        """numba began compiling (called from the thread that compiles)."""
+        if self.bar is not None:
+            self.bar.update(self.task, description="compiling",
+                            status=f"the tracer, for this machine (once; about {self.compile_seconds:.0f} s)")
+
+    def begin(self, watch) -> None:
+        """Tracing begins: the time left counts from now, without what ``watch`` sees compiled."""
+        self.watch, self.start = watch, (time.monotonic(), watch.seconds)
+        if self.bar is not None:
+            self.bar.update(self.task, description="tracing", status=f"0/{len(self.plan.units)} units")
+
+    def advance(self, unit, paths, from_store) -> None:
+        """A unit ended (or was taken from the store, ``from_store``)."""
+        now, compiled = time.monotonic(), self.watch.seconds
+        self.done += 1
+        self.traced += not from_store
+        if self.bar is None:
+            return
+        units, plan = len(self.plan.units), self.plan
+        elapsed = (now - self.start[0]) - (compiled - self.start[1])
+        left = f"{elapsed * (units - self.done) / self.traced:.0f} s left" if self.traced else "starting"
+        per_incidence = self.done * plan.paths_per_realization // plan.n_incidences
+        self.bar.update(self.task, advance=1, description="tracing",
+                        status=f"{self.done}/{units} units, {per_incidence:,} of {plan.paths:,} paths per "
+                               f"incidence, {left}")
 
     def __exit__(self, *exc):
         if self.bar is not None:
@@ -591,21 +757,67 @@ class _progress:
 
 
 def main(argv=None) -> int:
-    """Entry point of the ``microsim`` console script."""
+    """Entry point of the ``microsim`` command: 0, or the exit status of its one-line error.
+
+    A stop signal (SIGINT, SIGTERM, SIGHUP) ends the command in one line whenever it comes, and
+    the process then dies of it. While a run traces and writes its tables, :func:`_stop_on_signals`
+    stops it cleanly; at any other time there is nothing to clean up, and the process dies at
+    once: an exception raised from the handler could be swallowed (by a ctypes callback of
+    numba's compiler, seen to let a run go on to its end). Where a caller of ``main`` left SIGINT
+    to Python's KeyboardInterrupt, it is reported in the same line and ``main`` returns 130. The
+    handlers are the caller's again when ``main`` returns or raises."""
+    installed = _die_on_stop_signals()
     try:
         cli.main(args=argv, prog_name="microsim", standalone_mode=False)
-    except click.exceptions.Abort:
-        click.echo("microsim: aborted", err=True)
-        return 130
+    except (KeyboardInterrupt, click.exceptions.Abort):
+        click.echo("microsim: error: stopped by SIGINT", err=True)
+        return 128 + signal.SIGINT
     except click.ClickException as err:
+        _restore(installed)
         message = err.format_message().replace("\n", " ")
         click.echo(f"microsim: error: {message}", err=True)
-        if isinstance(err, Stopped) and threading.current_thread() is threading.main_thread():
-            sys.stderr.flush()
-            signal.signal(err.signum, signal.SIG_DFL)
-            os.kill(os.getpid(), err.signum)  # die of it, as the shell expects
+        if isinstance(err, Stopped):
+            die_of(err.signum)
         return EXIT_BAD_INPUT if isinstance(err, (click.UsageError, BadInput)) else err.exit_code
+    finally:
+        _restore(installed)
     return 0
+
+
+def _die_on_stop_signals() -> dict:
+    """Have each stop signal that is in its default disposition (Python's KeyboardInterrupt for
+    SIGINT) print the one line and end the process; returns the handlers replaced. Nothing
+    outside the main thread, and nothing for a signal that is ignored or that a caller handles."""
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    defaults = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL, signal.SIGHUP: signal.SIG_DFL}
+    installed = {}
+    for signum, default in defaults.items():
+        if signal.getsignal(signum) is default:
+            installed[signum] = signal.signal(signum, _stop_now)
+    return installed
+
+
+def _stop_now(signum, frame):
+    if sys.stderr.isatty():  # a progress line may be drawn: clear it, and show the cursor it hid
+        sys.stderr.write("\r\x1b[2K\x1b[?25h")
+    sys.stderr.write(f"microsim: error: stopped by {signal.Signals(signum).name}\n")
+    die_of(signum)
+
+
+def _restore(installed: dict) -> None:
+    for signum, handler in installed.items():
+        signal.signal(signum, handler)
+
+
+def die_of(signum: int) -> None:
+    """End this process by ``signum`` with its default action, as a shell expects of a process
+    that was stopped (status 128 + signum; a shell loop stops on Ctrl-C); nothing outside the
+    main thread (a caller that runs microsim in a thread of its own keeps its process)."""
+    if threading.current_thread() is threading.main_thread():
+        sys.stderr.flush()
+        signal.signal(signum, signal.SIG_DFL)
+        os.kill(os.getpid(), signum)
 
 
 if __name__ == "__main__":

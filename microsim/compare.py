@@ -15,6 +15,14 @@ Metrics are taken over the cells with signal, where the table value exceeds
 ``SIGNAL_TO_NOISE`` standard errors (a relative error means nothing on a cell the simulation
 did not resolve). NaN or infinity, in the table or in the model, is an error, never a cell
 silently left out.
+
+Chi-square per cell, and whether the model is consistent with the table: each cell's squared
+difference over the variance it would have if the model were the table's BRDF (the paths' and
+the realizations' share, :mod:`microsim.table_noise`), not over its own estimated error, which
+runs high at few paths a cell. 1 is expected, within two-sided CHI2_OUTSIDE bounds. The model
+is "consistent" with the table when chi-square lies within them and the albedo's z^2 (over the
+incidences) under its upper bound; above, it is not the table's BRDF; below, the table's errors
+are too large.
 """
 
 from __future__ import annotations
@@ -22,6 +30,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from .table_noise import CHI2_OUTSIDE, chi2_bounds, predicted_variance, realization_scale
 
 QUADRATURE_TOLERANCE = 0.05
 ALBEDO_TOLERANCE = 1e-4
@@ -52,6 +62,11 @@ class Comparison:
     albedo_sim: np.ndarray
     albedo_sim_stderr: np.ndarray
     quadrature_change: float  # largest last-refinement change, in standard errors
+    #: (n_i, n_c) each cell's variance if the model were right, the excess kurtosis of its paths'
+    #: part, and the realizations' share of it (table_noise.predicted_variance)
+    variance: np.ndarray
+    kurtosis: np.ndarray
+    common: np.ndarray
 
     def metrics(self, i: int | None = None) -> dict:
         """The metrics of one incidence, or over all incidences (``i=None``)."""
@@ -59,12 +74,23 @@ class Comparison:
         m, s, e, ok = self.model[rows], self.sim[rows], self.stderr[rows], self.signal[rows]
         rel = (m[ok] - s[ok]) / s[ok]
         z = (m[ok] - s[ok]) / e[ok]
+        v = self.variance[rows][ok]
+        chi2 = float(np.mean((m[ok] - s[ok]) ** 2 / v)) if z.size else float("nan")
+        low, high = chi2_bounds(self.kurtosis[rows][ok], self.common[rows][ok])
+        albedo_z = self.albedo_z()[rows]
+        albedo_limit = albedo_bound(albedo_z.size)
         out = {
             "cells_with_signal": int(ok.sum()),
             "median_abs_rel_err": float(np.median(np.abs(rel))) if rel.size else float("nan"),
             "rel_rmse": float(np.sqrt(np.mean(rel**2))) if rel.size else float("nan"),
             "max_abs_z": float(np.max(np.abs(z))) if z.size else float("nan"),
-            "chi2_per_cell": float(np.mean(z**2)) if z.size else float("nan"),
+            "chi2_per_cell": chi2,
+            "chi2_expected": 1.0,
+            "chi2_bounds": [low, high],
+            "albedo_z2": float(np.mean(albedo_z**2)),
+            "albedo_z2_bound": albedo_limit,
+            # None where no cell has signal: nothing to judge
+            "consistent": bool(low <= chi2 <= high and np.mean(albedo_z**2) <= albedo_limit) if z.size else None,
         }
         if i is None:
             out["albedo_model"] = float(np.mean(self.albedo_model))
@@ -75,6 +101,12 @@ class Comparison:
                    "albedo_sim_stderr": float(self.albedo_sim_stderr[i])}
         return out
 
+    def albedo_z(self) -> np.ndarray:
+        """(n_i,) (model's albedo - table's) / its standard error, the albedo quadrature's own
+        tolerance (ALBEDO_TOLERANCE of it) added in quadrature: a plane's albedo has no error."""
+        error = np.hypot(self.albedo_sim_stderr, ALBEDO_TOLERANCE * np.abs(self.albedo_model))
+        return (self.albedo_model - self.albedo_sim) / np.where(error > 0, error, np.inf)
+
     def as_dict(self) -> dict:
         return {
             "model": self.model_name,
@@ -83,6 +115,9 @@ class Comparison:
             "per_incidence": [self.metrics(i) for i in range(len(self.theta_i))],
             "overall": self.metrics(),
             "signal_rule": f"table value > {SIGNAL_TO_NOISE:g} standard errors",
+            "chi2_rule": "mean over the cells with signal of (model - table)^2 / v, v the cell's variance if the "
+                         f"model were right; bounds: {100 * (1 - CHI2_OUTSIDE):g} % two-sided; consistent: within "
+                         f"them, and the mean albedo z^2 below its {100 * (1 - CHI2_OUTSIDE / 2):g} % point",
             "quadrature_max_change_in_stderr": self.quadrature_change,
         }
 
@@ -145,9 +180,14 @@ class CellRule:
         return np.bincount(self.cells, weights=model(self.wi, self.nodes) * self.weights, minlength=self.n_cells)
 
 
-def compare(table, model, order: str = "all") -> Comparison:
+def compare(table, model, order: str = "all", **params) -> Comparison:
     """Average ``model`` over the cells of ``table`` (a :class:`microsim.tables.Table`) and compare;
-    ValueError (one line) if no cell has signal."""
+    ValueError (one line) if no cell has signal. ``model``: a model (``models.create(...)``), a
+    registered model's name, a :class:`~microsim.models.BRDFModel` subclass or a plain function
+    ``f(wi, wo, **params)`` (:mod:`microsim.models.user_models`), made with ``params``."""
+    from .models import as_model
+
+    model = as_model(model, **params)
     names, sim, stderr, albedo_sim, albedo_se = selection(table, order)
     if not with_signal(sim, stderr).any():
         raise ValueError(f"table {table.path}: no cell of order {order} has signal (a value above "
@@ -159,8 +199,20 @@ def compare(table, model, order: str = "all") -> Comparison:
         worst = max(worst, change)
     _require_finite(modelled, f"model {model!r}")
     p = table.projected_solid_angle
+    signal = with_signal(sim, stderr)
     return Comparison(model.name, dict(model.values), order, table.theta_i, table.phi_i, modelled, sim, stderr,
-                      with_signal(sim, stderr), modelled @ p, albedo_sim, albedo_se, worst)
+                      signal, modelled @ p, albedo_sim, albedo_se, worst,
+                      *predicted_variance(modelled, sim, stderr, signal, p,
+                                          realization_scale(sim, stderr, albedo_sim, albedo_se, p, table.paths,
+                                                            int(table.attrs.get("realizations", 2)))))
+
+
+def albedo_bound(incidences: int) -> float:
+    """Upper CHI2_OUTSIDE / 2 bound of the mean albedo z^2 over ``incidences`` (chi-square of that
+    many degrees of freedom, over their number) for an exact model."""
+    from scipy.stats import chi2
+
+    return float(chi2.ppf(1 - CHI2_OUTSIDE / 2, incidences) / incidences)
 
 
 def with_signal(sim, stderr) -> np.ndarray:

@@ -84,6 +84,15 @@ class Run(Section):
         "auto", description="how Embree is called: direct (numba, native spheres, threads) or embreex; "
                             "auto = direct where its binding loads")
 
+    @pydantic.model_validator(mode="after")
+    def _a_path_for_every_realization(self):
+        """Every realization traces paths / realizations of them, rounded up: with fewer paths
+        than realizations, the run would trace more paths than asked, one scene for each."""
+        if self.paths < self.realizations:
+            raise ValueError(f"run.paths = {self.paths:,}: fewer than run.realizations = {self.realizations:,}; "
+                             "accepted: at least one path a realization (run.paths >= run.realizations)")
+        return self
+
 
 class Config(Section):
     name: str | None = Field(None, max_length=200, pattern=r"^[^\x00-\x1f\x7f]*$",

@@ -34,6 +34,7 @@ from itertools import groupby
 
 import numpy as np
 
+from . import interrupts
 from .rng import geometry_rng, stream_key
 
 #: Linux prctl option: the signal a process gets when its parent dies
@@ -82,7 +83,6 @@ def local(plan, units, emit, workers: int = 1, scheduler: str | None = None) -> 
     if len(blocks) <= 1:
         trace_units(plan, units, emit)
         return
-    plan.tracer_class.compile(plan.build_sensor(), **plan.tracer_options)  # once, before the fork
     _trace_on_workers(plan, blocks, emit)
 
 
@@ -158,6 +158,23 @@ def _trace_task(plan, units) -> list:
     return done
 
 
+def _start_fork_server() -> None:
+    """Start multiprocessing's fork server (once a process), ignoring SIGINT: the workers of a
+    local Dask cluster are forked from it, and take its SIGINT disposition (the server keeps
+    the one it started with for its children). A terminal's Ctrl-C goes to the whole process
+    group, and every worker printed a KeyboardInterrupt traceback (67 lines); the main process
+    alone decides, and closes the cluster. The server is started in milliseconds, the only
+    moment SIGINT is ignored here (:func:`interrupts.ignored_by_new_processes`). A fork server
+    that something else started first keeps its own disposition."""
+    from multiprocessing import forkserver
+
+    from distributed.utils import get_mp_context
+
+    get_mp_context()  # distributed's list of modules the server imports once, for every worker
+    with interrupts.ignored_by_new_processes():
+        forkserver.ensure_running()
+
+
 def dask(plan, units, emit, workers: int = 1, scheduler: str | None = None) -> None:
     """Trace ``units`` on the dask.distributed cluster at ``scheduler``, or on a LocalCluster of
     ``workers`` single-threaded worker processes; one task per realization, results emitted as
@@ -178,13 +195,14 @@ def dask(plan, units, emit, workers: int = 1, scheduler: str | None = None) -> N
     for log in logs:
         log.setLevel(logging.CRITICAL)
     token = uuid.uuid4().hex[:12]  # task keys of this run, unlike any other run's on a shared cluster
-    with dask_config.set({"distributed.scheduler.allowed-failures": DASK_ALLOWED_FAILURES}):
+    with dask_config.set({"distributed.scheduler.allowed-failures": DASK_ALLOWED_FAILURES,
+                          "distributed.worker.multiprocessing-method": "forkserver"}):
         try:
             if scheduler is None:
-                # compiled here, the kernels are in numba's disk cache before the workers load them
-                plan.tracer_class.compile(plan.build_sensor(), **plan.tracer_options)
+                _start_fork_server()
+                # its HTTP server on a free port (None takes 8787, and warns in 4 lines if another run holds it)
                 cluster = LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True,
-                                       dashboard_address=None, silence_logs=logging.ERROR)
+                                       dashboard_address=":0", silence_logs=logging.CRITICAL)
                 client = Client(cluster)
             else:
                 try:

@@ -16,13 +16,9 @@ import functools
 import hashlib
 from pathlib import Path
 
-from numba.core import caching
-
 PACKAGE = Path(__file__).resolve().parent
 #: files whose kernels get the package stamp: the package, and the checkout's callers of it
 STAMPED = (PACKAGE, PACKAGE.parent / "benchmarks", PACKAGE.parent / "tests")
-#: the class whose list of locators numba tries in order (named _CacheImpl before numba 0.60)
-_CACHE_IMPL = getattr(caching, "CacheImpl", None) or caching._CacheImpl
 
 
 def sources(root: Path = PACKAGE) -> list[Path]:
@@ -62,9 +58,16 @@ def is_stamped(path: Path) -> bool:
     return any(path.is_relative_to(root) for root in STAMPED)
 
 
+def cache_impl():
+    """The numba class whose list of locators numba tries in order (named _CacheImpl before 0.60)."""
+    from numba.core import caching
+
+    return getattr(caching, "CacheImpl", None) or caching._CacheImpl
+
+
 def install() -> None:
     """Wrap every numba cache locator with :class:`PackageStamped` (idempotent)."""
-    locators = _CACHE_IMPL._locator_classes
+    locators = cache_impl()._locator_classes
     for j, locator in enumerate(locators):
         if not issubclass(locator, PackageStamped):
             locators[j] = type(locator.__name__, (PackageStamped, locator), {})

@@ -28,6 +28,8 @@ import geometry
 
 from .frames import direction
 from . import embree, executors, integrators
+from .rng import stream_key
+from .compile_watch import CompileWatch
 from .integrators import fused, wavefront
 from .integrators.records import BASE_ROW, COUNT_NAMES, ENERGY_NAMES, ORDERS, RESULT_ALL_ORDERS, RESULT_ROWS, \
     SINGLE_ALBEDO, TALLY_ROWS, per_albedo
@@ -321,6 +323,15 @@ def check_memory(plan: Plan, sensor: Sensor, workers: int, spawned: bool = False
                         f"sensor.cells or --workers")
 
 
+def compile_tracer(plan: Plan, sensor: Sensor | None = None) -> None:
+    """Compile (or load from numba's cache) the kernels of the plan's tracer in this process:
+    before worker processes fork (they inherit the machine code) or a local Dask cluster
+    starts (its workers load it from the disk cache), and outside the time a run reports."""
+    plan.tracer_class.compile(sensor if sensor is not None else plan.build_sensor(), albedos=len(plan.albedo_scale),
+                              **plan.tracer_options)
+    stream_key(plan.config.run.seed, 0, 0)  # each unit's random stream
+
+
 #: the executors of ``--executor`` (microsim.executors)
 EXECUTORS = {"local": executors.local, "dask": executors.dask}
 
@@ -350,8 +361,10 @@ def run_albedos(config, workers: int = 1, threads: int = 1, progress=None, execu
     if scheduler is None:  # on this machine (a cluster's workers are elsewhere)
         check_memory(plan, sensor, workers, spawned=executor == "dask")
     reducer = _Reducer(plan, sensor)
-    start = time.perf_counter()
     saved = set(store.saved_units()) if store is not None else set()
+    missing = [unit for unit in plan.units if unit not in saved]
+    if missing and scheduler is None:
+        compile_tracer(plan, sensor)  # outside the run's time, and before any worker starts
     if progress is not None:
         for unit in sorted(saved):
             progress(unit, plan.paths_per_realization, True)
@@ -369,11 +382,12 @@ def run_albedos(config, workers: int = 1, threads: int = 1, progress=None, execu
         if progress is not None:
             progress(unit, tally.paths, False)
 
-    reduce_saved()
-    missing = [unit for unit in plan.units if unit not in saved]
-    if missing:
-        EXECUTORS[executor](plan, missing, collect, workers, scheduler)
+    with CompileWatch() as watch:  # what numba compiles here while the run traces is not the run's time
+        start = time.perf_counter()
+        reduce_saved()
+        if missing:
+            EXECUTORS[executor](plan, missing, collect, workers, scheduler)
     for result in reducer.results:
-        result.wall_time = time.perf_counter() - start
+        result.wall_time = time.perf_counter() - start - watch.seconds  # the tracing, without compiling
         result.units_resumed, result.units_traced = len(plan.units) - len(missing), len(missing)
     return reducer.results

@@ -29,7 +29,7 @@ BASES = {
     "plane": {"scene": {"kind": "plane"}, "material": {"kind": "lambert", "albedo": 0.5}},
     "poisson_spheres": {"scene": {"kind": "poisson_spheres", "volume_fraction": 0.3, "tile": 8.0, "depth": 4.0},
                         "material": {"kind": "lambert", "albedo": 0.8}},
-    "micrograins": {"scene": {"kind": "micrograins", "tau0": 0.5, "beta": 1.0, "tile": 6.0},
+    "micrograins": {"scene": {"kind": "micrograins", "tau0": 0.5, "beta": 1.0, "tile": 7.0},
                     "material": {"kind": "conductor", "eta": 1.0152, "k": 6.6273}},
     "vcavities": {"scene": {"kind": "vcavities", "distribution": "beckmann", "roughness": 0.5},
                   "material": {"kind": "lambert", "albedo": 0.5}},

@@ -117,6 +117,14 @@ BAD_CONFIGS = {
     "name with a control character": (edit('name = "small"', 'name = "sm\\u0000all"'), "name"),
     "base under a plane": (lambda text: text.replace('kind = "poisson_spheres"\nvolume_fraction = 0.3\ntile = 16.0\ndepth = 8.0',
                                                      'kind = "plane"') + '\n[base]\nkind = "absorber"\n', "base"),
+    # issue 24, defect 10: configs that can only give meaningless tables
+    "fewer paths than realizations": (edit("paths = 20_000", "paths = 3"), "run.paths = 3: fewer than run.realizations"),
+    "realizations of no path": (edit("realizations = 4", "realizations = 100000"), "run.paths = 20,000: fewer than"),
+    "a slab of 4 spheres": (edit("tile = 16.0\ndepth = 8.0", "tile = 4.0\ndepth = 3.0"),
+                            "scene.tile = 4, scene.depth = 3: 4.09 spheres expected a realization"),
+    "a tile of 0.22 grains": (edit('kind = "poisson_spheres"\nvolume_fraction = 0.3\ntile = 16.0\ndepth = 8.0',
+                                   'kind = "micrograins"\ntau0 = 0.5\nbeta = 1.0\ntile = 1.0'),
+                              "scene.tile = 1: 0.221 grains expected a tile (tau0 0.5); accepted: at least 10"),
 }
 
 
@@ -277,3 +285,18 @@ def test_a_list_of_the_wrong_length_names_the_limit_and_quotes_an_excerpt(count,
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and "illumination.theta_i_deg" in lines[0], lines
     assert "1 to 256" in lines[0] and f"{count:,} items" in lines[0] and len(lines[0]) < 250, lines[0]
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["run", "--help"], ["compare", "--help"], ["run"], ["fit", "x.h5"],
+                                  ["run", "c.toml", "--workers", "0"]],
+                         ids=["--help", "run --help", "compare --help", "no config", "no --model", "--workers 0"])
+def test_help_and_argument_errors_load_none_of_the_work(argv):
+    """Issue 24, defect 14: every command paid 3.5-4.3 s of start-up, --help included, because
+    importing the command line loaded numba; help and usage errors need none of the work's
+    modules (measured with a clock in the closing note: 0.15 s)."""
+    code = ("import sys\nfrom microsim.cli import main\nstatus = main(sys.argv[1:])\n"
+            "print(status, sorted(m for m in ('numba', 'h5py', 'pydantic', 'scipy', 'geometry', 'trimesh') "
+            "if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True)
+    status, loaded = done.stdout.splitlines()[-1].split(" ", 1)
+    assert (status, loaded) == ("0" if "--help" in argv else "2", "[]"), done.stderr

@@ -67,3 +67,36 @@ def test_max_order_truncates_and_reports_the_rest(simulate):
     assert t.truncated[0] > 0.01
     a = t.arrays
     assert abs(a["energy/balance"][0] - 1.0) <= 4 * a["energy/balance_stderr"][0] + 1e-12
+
+
+def test_the_run_line_names_energy_lost_beyond_the_albedo_s_error_and_paths_rounded_up(tmp_path, capsys):
+    """Issue 24, defects 16 and 10: albedo-1 spheres printed 0.979 with nothing said of the 2.1 %
+    transmitted through the slab; paths were rounded up to a multiple of the realizations
+    silently. A deep slab of the same spheres, every path asked traced, says neither."""
+    import tomllib
+
+    from microsim import tables
+    from microsim.cli import main
+    from microsim.tables import dict_to_toml
+
+    lines = {}
+    for name, depth, max_order, paths in (("thin", 3.0, 2, 4001), ("deep", 30.0, 0, 4000)):
+        data = spheres(0.8, [0.0, 60.0], depth=depth)
+        data["run"].update(paths=paths, realizations=4, max_order=max_order)
+        config = tmp_path / f"{name}.toml"
+        config.write_text(dict_to_toml(data))
+        assert main(["run", str(config), "--out", str(tmp_path / f"{name}.h5")]) == 0
+        lines[name] = capsys.readouterr().out.splitlines()
+        table = tables.load(tmp_path / f"{name}.h5")
+    thin = tables.load(tmp_path / "thin.h5")
+    assert np.all(thin.transmitted > thin.albedo_stderr) and np.all(thin.truncated > thin.albedo_stderr)
+    notes = [line for line in lines["thin"] if line.startswith("energy")]
+    for line, kind in zip(notes, ("transmitted", "truncated")):
+        values = ", ".join(f"{theta:g}deg {value:.4f}" for theta, value in zip((0.0, 60.0), getattr(thin, kind)))
+        assert line.startswith(f"energy {kind}, beyond the albedo's standard error: {values} (")
+    assert len(notes) == 2
+    assert "paths: 4,004 an incidence traced for the 4,001 asked: 4 realizations of 1,001" in "\n".join(lines["thin"])
+    deep = tables.load(tmp_path / "deep.h5")
+    assert np.all(deep.transmitted <= deep.albedo_stderr) and np.all(deep.truncated == 0)
+    assert not any(line.startswith(("energy", "paths:")) for line in lines["deep"]), lines["deep"]
+    assert tomllib.loads(table.attrs["config_toml"])["run"]["paths"] == 4000

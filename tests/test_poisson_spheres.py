@@ -125,7 +125,7 @@ def test_default_tile_and_its_bias_floor(phi, theta_max):
     up to 88 deg (module doc)."""
     cfg = scene_config(volume_fraction=phi).model_copy(update={"illumination": config.validate({
         "scene": {"kind": "plane"}, "material": {"kind": "lambert", "albedo": 0.5},
-        "illumination": {"theta_i_deg": [0.0, theta_max]}, "run": {"paths": 10}}).illumination})
+        "illumination": {"theta_i_deg": [0.0, theta_max]}, "run": {"paths": 100}}).illumination})
     resolved = SPHERES.resolve(cfg)
     floor = max(3.0 * free_path(phi), 2.0 / math.cos(math.radians(max(theta_max, 85.0))))
     assert resolved["tile"] == SPHERES.TILE and resolved["tile_bias_floor"] == pytest.approx(floor)

@@ -157,6 +157,9 @@ def test_a_damaged_unit_file_is_never_taken(tmp_path):
 
 
 def test_progress_counts_resumed_units_as_done_and_times_only_the_traced(tmp_path, monkeypatch):
+    """Resumed units count as done but not in the rate; seconds numba spent compiling while a
+    unit traced are not in the rate either (issue 24, defect 14), and the line says so while
+    numba compiles."""
     from types import SimpleNamespace
 
     from microsim import cli
@@ -167,17 +170,21 @@ def test_progress_counts_resumed_units_as_done_and_times_only_the_traced(tmp_pat
     clock = [100.0]
     monkeypatch.setattr(cli, "time", SimpleNamespace(monotonic=lambda: clock[0]))
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)
-    progress = cli._progress(plan)
-    advance = progress.__enter__()
-    try:
+    watch = SimpleNamespace(seconds=0.0)
+    progress = cli._Progress(plan, compile_seconds=20)
+    with progress:
+        progress.compiling()
+        task = progress.bar.tasks[0]
+        assert (task.description, task.fields["status"]) == ("compiling", "the tracer, for this machine (once; about 20 s)")
+        progress.begin(watch)
         for unit in plan.units[:3]:
-            advance(unit, plan.paths_per_realization, True)
-        assert progress.bar.tasks[0].fields["status"].endswith("starting")  # no rate from resumed units
-        clock[0] += 2.0  # one unit traced in 2 s: 28 left
-        advance(plan.units[3], plan.paths_per_realization, False)
-        status = progress.bar.tasks[0].fields["status"]
-    finally:
-        progress.__exit__(None, None, None)
+            progress.advance(unit, plan.paths_per_realization, True)
+        assert task.fields["status"].endswith("starting")  # no rate from resumed units
+        clock[0] += 2.0 + 7.0  # one unit traced in 2 s, and 7 s of compiling meanwhile: 28 units left
+        watch.seconds = 7.0
+        progress.advance(plan.units[3], plan.paths_per_realization, False)
+        status = task.fields["status"]
+    assert task.description == "tracing"
     assert status == (f"4/{UNITS} units, {4 * plan.paths_per_realization // 2:,} of {plan.paths:,} paths per "
                       f"incidence, {2.0 * (UNITS - 4):.0f} s left")
 
@@ -279,3 +286,32 @@ def test_a_full_disk_ends_the_run_in_one_line_keeping_its_units(tmp_path, capsys
     assert len(lines) == 1 and "No space left on device" in lines[0] and "MB free" in lines[0], lines
     assert lines[0].endswith(f"; 3 of {UNITS} units kept in {store} (rerun with --resume to finish)"), lines[0]
     assert not out.exists() and not list(store.glob(".*.tmp")) and len(list(store.glob("r*.npz"))) == 3
+
+
+def test_a_table_that_cannot_be_written_ends_the_run_in_one_line_keeping_every_unit(tmp_path, capsys, monkeypatch):
+    """A full disk while the table is written (after every unit was traced): one line naming the
+    table, the reason and the space left, exit 1, every unit kept for --resume, no temporary."""
+    import errno
+
+    import h5py
+
+    from microsim import tables
+
+    config = tmp_path / "run.toml"
+    config.write_text(RUN.replace("paths = 2_560_000", "paths = 3200"))
+    out = tmp_path / "t.h5"
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(tables.h5py.Dataset, "attrs", property(full))
+    assert main(["run", str(config), "--out", str(out)]) == 1
+    lines = capsys.readouterr().err.splitlines()
+    store = unit_store.store_path(out)
+    assert len(lines) == 1 and lines[0].startswith(f"microsim: error: cannot write the table {out}: No space left on "
+                                                   "device, "), lines
+    assert lines[0].endswith(f" MB free there; {UNITS} of {UNITS} units kept in {store} (rerun with --resume to finish)")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.toml", store.name]
+    monkeypatch.undo()
+    assert main(["run", str(config), "--out", str(out), "--resume"]) == 0
+    assert h5py.is_hdf5(out)

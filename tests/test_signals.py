@@ -41,14 +41,10 @@ def running(pid: int) -> bool:
         return False
 
 
-def handles_sigterm(pid: int) -> bool:
-    """Whether ``pid`` has a handler for SIGTERM (the CLI installs it just before tracing)."""
-    try:
-        status = Path(f"/proc/{pid}/status").read_text()
-    except OSError:
-        return False
-    caught = int(next(line.split()[1] for line in status.splitlines() if line.startswith("SigCgt:")), 16)
-    return bool(caught >> (signal.SIGTERM - 1) & 1)
+def tracing(out: Path) -> bool:
+    """Whether the run of ``out`` traces: its unit store is open (just before the first unit;
+    the CLI then stops on a signal cleanly, with its units kept)."""
+    return Path(f"{out}.partial").is_dir()
 
 
 def start_run(tmp_path, *options, ignore_hup=False):
@@ -82,7 +78,7 @@ def test_a_signal_to_the_main_process_stops_every_worker(tmp_path, name):
     process, out = start_run(tmp_path, "--workers", "2")
     workers = []
     try:
-        assert wait_until(lambda: handles_sigterm(process.pid) and len(children(process.pid)) >= 2, 120)
+        assert wait_until(lambda: tracing(out) and len(children(process.pid)) >= 2, 120)
         workers = children(process.pid)
         time.sleep(1.0)  # tracing by now
         process.send_signal(signum)
@@ -107,7 +103,7 @@ def test_a_signal_to_the_main_process_stops_every_worker(tmp_path, name):
 def test_a_run_on_threads_stops_on_sigterm(tmp_path):
     process, out = start_run(tmp_path, "--threads", "2")
     try:
-        assert wait_until(lambda: handles_sigterm(process.pid), 120)
+        assert wait_until(lambda: tracing(out), 120)
         time.sleep(1.0)
         process.send_signal(signal.SIGTERM)
         status = process.wait(timeout=15)
@@ -122,7 +118,7 @@ def test_a_signal_ignored_at_start_stays_ignored(tmp_path):
     """Under nohup a hangup must not stop the run."""
     process, out = start_run(tmp_path, "--threads", "2", ignore_hup=True)
     try:
-        assert wait_until(lambda: handles_sigterm(process.pid), 120)
+        assert wait_until(lambda: tracing(out), 120)
         process.send_signal(signal.SIGHUP)
         time.sleep(2.0)
         assert process.poll() is None, process.communicate()[1]
@@ -159,3 +155,79 @@ def test_a_signal_once_the_table_is_written_leaves_a_finished_run_exiting_0(tmp_
         assert signal.getsignal(signum) is interrupted  # the handlers are the caller's again
     finally:
         signal.signal(signum, handler)
+
+
+def interrupt_group(command: list[str], cwd: Path, when) -> tuple[int, str]:
+    """Start ``command`` as a terminal's foreground job (a process group of its own, default
+    dispositions), send SIGINT to the whole group as Ctrl-C does once ``when(process)`` holds,
+    and return its status and stderr. Whatever is left of the group is killed."""
+    def dispositions():
+        for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+            signal.signal(signum, signal.SIG_DFL)
+
+    process = subprocess.Popen(command, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, cwd=cwd,
+                               start_new_session=True, preexec_fn=dispositions)
+    try:
+        assert wait_until(lambda: when(process), 120), "the moment to interrupt never came"
+        os.killpg(process.pid, signal.SIGINT)
+        status = process.wait(timeout=60)
+        return status, process.communicate(timeout=30)[1]
+    finally:
+        with contextlib.suppress(OSError):
+            os.killpg(process.pid, signal.SIGKILL)
+
+
+def after(seconds: float):
+    start = time.monotonic()
+    return lambda process: time.monotonic() - start >= seconds
+
+
+@pytest.mark.parametrize("moment", ["importing", "cluster starting", "tracing"])
+def test_ctrl_c_to_a_dask_run_s_process_group_is_one_line_whenever_it_comes(tmp_path, moment):
+    """Issue 24, defect 7: Ctrl-C to the process group printed the KeyboardInterrupt tracebacks
+    of every Dask worker (67 lines), and during the imports a traceback of the main process."""
+    pytest.importorskip("distributed")
+    out = tmp_path / "stopped.h5"
+    command = [sys.executable, "-m", "microsim", "run", str(RUN), "--paths", str(10**9), "--out", str(out),
+               "--executor", "dask", "--workers", "2"]
+    when = {"importing": after(0.3),
+            "cluster starting": lambda process: len(children(process.pid)) >= 1,
+            "tracing": lambda process: tracing(out) and after_tracing(out, 2.0)}[moment]
+    status, stderr = interrupt_group(command, tmp_path, when)
+    assert status == -signal.SIGINT
+    assert len(stderr.splitlines()) == 1 and stderr.startswith("microsim: error: stopped by SIGINT"), stderr
+    assert not out.exists()
+
+
+def after_tracing(out: Path, seconds: float) -> bool:
+    """Whether the run of ``out`` has traced for ``seconds`` (its unit store is that old)."""
+    return time.time() - Path(f"{out}.partial").stat().st_mtime >= seconds
+
+
+def test_ctrl_c_while_a_command_imports_is_one_line(tmp_path):
+    command = [sys.executable, "-m", "microsim", "compare", str(tmp_path / "absent.h5"), "--model", "lambert"]
+    status, stderr = interrupt_group(command, tmp_path, after(0.15))
+    assert (status, stderr) == (-signal.SIGINT, "microsim: error: stopped by SIGINT\n")
+
+
+def test_main_gives_the_caller_s_handlers_back_whatever_ends_it(tmp_path, monkeypatch, capsys):
+    """main() replaces the default handlers of the stop signals with its own (one line, then the
+    process dies of the signal); an exception it does not report (a model's own error) must not
+    leave them behind in the caller's process."""
+    from microsim import cli
+
+    def broken(path):
+        raise RuntimeError("a bug")
+
+    monkeypatch.setattr(cli, "_load_table", broken)
+    defaults = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL, signal.SIGHUP: signal.SIG_DFL}
+    previous = {signum: signal.signal(signum, handler) for signum, handler in defaults.items()}
+    try:
+        with pytest.raises(RuntimeError, match="a bug"):
+            cli.main(["compare", str(tmp_path / "t.h5"), "--model", "lambert", "--param", "albedo=0.5"])
+        assert {signum: signal.getsignal(signum) for signum in defaults} == defaults
+        assert cli.main(["models"]) == 0
+        assert {signum: signal.getsignal(signum) for signum in defaults} == defaults
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)

@@ -15,7 +15,7 @@ BASE = """[scene]
 kind = "poisson_spheres"
 volume_fraction = 0.2
 tile = 8.0
-depth = 4.0
+depth = 8.0
 [material]
 kind = "lambert"
 albedo = 0.8

@@ -125,8 +125,15 @@ def compile_kernels(beam, scene, sensor) -> None:
     no device. The library is loaded first: the kernel's machine code links to rtcIntersect1 by
     name (without it, loading the code segfaults)."""
     embree.available()
-    work = workspace(1, sensor.tally_width)
+    work = workspace(1, sensor.tally_width, albedos=len(beam.albedo_scale))
     trace_chunks(0, 0, 0, beam, scene.arrays(), embree.SceneHandle(0, np.zeros(1, np.int64), np.ones(2)), sensor, work)
+    compile_tally_sums(beam, work)
+
+
+def compile_tally_sums(beam, work) -> None:
+    """Compile (or load) :func:`add_chunks` for the tallies of this beam and workspace, adding
+    nothing: :func:`trace_in_waves` calls it after a unit's first wave."""
+    add_chunks(empty_tally(0, work.exit_weight.shape[-1], beam.albedo_scale), work, 0)
 
 
 class FusedBackend:

@@ -43,7 +43,7 @@ from ..materials import scatter
 from ..models.distributions import sample_slope
 from ..rng import uniform
 from .events import add_interaction, begin_path, exit_top, survives_interaction, truncate
-from .fused import CHUNK_PATHS, chunk_tally, trace_in_waves, wave_rows, workspace
+from .fused import CHUNK_PATHS, chunk_tally, compile_tally_sums, trace_in_waves, wave_rows, workspace
 from .records import SEGMENTS, SINGLE_ALBEDO, Beam
 
 #: facets of a groove, as :func:`meet_analytic` and :func:`meet_embree` name them; NONE: no facet
@@ -60,6 +60,10 @@ class VCavityTracer:
     ``threads`` threads; ``backend`` is the run's Embree binding, used by the ``embree``
     intersector only. ``log_rays`` > 0 (one thread, ``embree`` intersector) keeps the first
     ``log_rays`` Embree queries in ``ray_log`` (rows of origin, direction, tfar)."""
+
+    #: seconds numba takes to compile the kernels of each backend, cold (AMD EPYC Zen 4, 2026-12-02;
+    #: the progress line quotes it while it compiles)
+    COMPILE_SECONDS = {"direct": 10, "embreex": 10}
 
     def __init__(self, scene, sensor, backend: str = "direct", threads: int = 1, log_rays: int = 0):
         if log_rays and (threads != 1 or scene.intersector != "embree"):
@@ -87,15 +91,17 @@ class VCavityTracer:
         return total
 
     @classmethod
-    def compile(cls, sensor, backend: str = "direct", threads: int = 1) -> None:
-        """Compile (or load) both kernels before workers fork, tracing nothing (the Embree one only
-        where the library loads: its machine code links to rtcIntersect1 by name)."""
+    def compile(cls, sensor, backend: str = "direct", threads: int = 1, albedos: int = 1) -> None:
+        """Compile (or load) both kernels before workers fork, for runs of ``albedos`` albedos,
+        tracing nothing (the Embree one only where the library loads: its machine code links to
+        rtcIntersect1 by name)."""
         from geometry.vcavities import Grooves
 
-        beam = Beam(np.array([0.0, 0.0, 1.0]), np.uint64(0), 0, 0)
+        beam = Beam(np.array([0.0, 0.0, 1.0]), np.uint64(0), 0, 0, np.ones(albedos))
         grooves = Grooves(0, 0.5, 0.5, 0, np.zeros(2))
-        work = workspace(1, sensor.tally_width)
+        work = workspace(1, sensor.tally_width, albedos=albedos)
         trace_chunks_analytic(0, 0, 0, beam, grooves, sensor, work)
+        compile_tally_sums(beam, work)
         try:
             embree.available()
         except embree.EmbreeUnavailable:

@@ -13,8 +13,10 @@ import importlib
 import pkgutil
 
 from .base import BRDFModel, Param, available, create, get, register
+from .user_models import FunctionModel, UserModelError, as_model, model_class
 
 for _module in pkgutil.iter_modules(__path__):
     importlib.import_module(f"{__name__}.{_module.name}")
 
-__all__ = ["BRDFModel", "Param", "available", "create", "get", "register"]
+__all__ = ["BRDFModel", "FunctionModel", "Param", "UserModelError", "as_model", "available", "create", "get",
+           "model_class", "register"]

@@ -120,8 +120,10 @@ class BRDFModel:
         return f"{type(self).__name__}({args})"
 
     def __call__(self, wi, wo) -> np.ndarray:
-        wi = np.asarray(wi, dtype=np.float64)
-        wo = np.asarray(wo, dtype=np.float64)
+        """f in 1/sr for directions ``wi``, ``wo`` of shape (..., 3) (broadcast), normalised:
+        a model sees unit vectors whatever their length; ValueError for a vector of length 0,
+        NaN or infinity. 0 where either direction lies below the horizon."""
+        wi, wo = _unit(wi, "wi"), _unit(wo, "wo")
         wi, wo = np.broadcast_arrays(wi, wo)
         shape = wi.shape[:-1]
         wi = wi.reshape(-1, 3)
@@ -134,6 +136,21 @@ class BRDFModel:
 
     def _eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         raise NotImplementedError
+
+
+#: a direction whose length is 1 within this is not normalised again
+UNIT_TOLERANCE = 1e-12
+
+
+def _unit(w, name: str) -> np.ndarray:
+    w = np.asarray(w, dtype=np.float64)
+    if w.shape[-1:] != (3,):
+        raise ValueError(f"{name}: directions of shape (..., 3) expected, got {w.shape}")
+    length = np.sqrt(np.sum(w * w, axis=-1, keepdims=True))
+    if not np.all(np.isfinite(length) & (length > 0.0)):
+        raise ValueError(f"{name}: a direction of length 0, NaN or infinity")
+    # a unit vector to rounding is taken as it is: a model's values do not move by an ulp
+    return w / np.where(np.abs(length - 1.0) > UNIT_TOLERANCE, length, 1.0)
 
 
 _REGISTRY: dict[str, type[BRDFModel]] = {}
