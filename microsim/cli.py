@@ -699,9 +699,12 @@ class _Progress:
     While numba compiles the tracer it says so, with the time that takes here
     (``COMPILE_SECONDS`` of the tracer class); then it counts units (realization x incidence) and
     paths per incidence, as ``--paths`` does. Its time left is the mean rate of the units traced
-    since tracing began, without the seconds spent compiling (``watch``), applied to what is
-    left (steadier than a recent rate when units end in bursts, as they do with workers; units
-    taken from a resumed run's store count as done, not in the rate)."""
+    since the first one ended, without the seconds spent compiling (``watch``), applied to what
+    is left: the first unit carries the start (forking workers, building their first scenes),
+    which made the first estimates of a run on 2 workers 4.4 times the true time left (measured
+    by benchmarks/first_run.py); a mean rate is steadier than a recent one when units end in
+    bursts, as they do with workers. Units taken from a resumed run's store count as done, not
+    in the rate."""
 
     def __init__(self, plan, compile_seconds: float):
         self.plan, self.compile_seconds = plan, compile_seconds
@@ -730,8 +733,8 @@ class _Progress:
                             status=f"the tracer, for this machine (once; about {self.compile_seconds:.0f} s)")
 
     def begin(self, watch) -> None:
-        """Tracing begins: the time left counts from now, without what ``watch`` sees compiled."""
-        self.watch, self.start = watch, (time.monotonic(), watch.seconds)
+        """Tracing begins: the rate leaves out what ``watch`` sees compiled."""
+        self.watch = watch
         if self.bar is not None:
             self.bar.update(self.task, description="tracing", status=f"0/{len(self.plan.units)} units")
 
@@ -740,11 +743,14 @@ class _Progress:
         now, compiled = time.monotonic(), self.watch.seconds
         self.done += 1
         self.traced += not from_store
+        if not from_store and self.start is None:
+            self.start = (now, compiled)  # the first traced unit: the rate counts from here
         if self.bar is None:
             return
         units, plan = len(self.plan.units), self.plan
-        elapsed = (now - self.start[0]) - (compiled - self.start[1])
-        left = f"{elapsed * (units - self.done) / self.traced:.0f} s left" if self.traced else "starting"
+        elapsed = (now - self.start[0]) - (compiled - self.start[1]) if self.start else 0.0
+        rate_units = self.traced - 1
+        left = f"{elapsed * (units - self.done) / rate_units:.0f} s left" if rate_units > 0 else "starting"
         per_incidence = self.done * plan.paths_per_realization // plan.n_incidences
         self.bar.update(self.task, advance=1, description="tracing",
                         status=f"{self.done}/{units} units, {per_incidence:,} of {plan.paths:,} paths per "

@@ -157,9 +157,9 @@ def test_a_damaged_unit_file_is_never_taken(tmp_path):
 
 
 def test_progress_counts_resumed_units_as_done_and_times_only_the_traced(tmp_path, monkeypatch):
-    """Resumed units count as done but not in the rate; seconds numba spent compiling while a
-    unit traced are not in the rate either (issue 24, defect 14), and the line says so while
-    numba compiles."""
+    """Resumed units count as done but not in the rate, nor does the first traced unit (it carries
+    the start); seconds numba spent compiling while a unit traced are not in the rate either
+    (issue 24, defect 14), and the line says so while numba compiles."""
     from types import SimpleNamespace
 
     from microsim import cli
@@ -180,13 +180,16 @@ def test_progress_counts_resumed_units_as_done_and_times_only_the_traced(tmp_pat
         for unit in plan.units[:3]:
             progress.advance(unit, plan.paths_per_realization, True)
         assert task.fields["status"].endswith("starting")  # no rate from resumed units
-        clock[0] += 2.0 + 7.0  # one unit traced in 2 s, and 7 s of compiling meanwhile: 28 units left
-        watch.seconds = 7.0
+        clock[0] += 30.0  # the first traced unit carries the start: not in the rate
         progress.advance(plan.units[3], plan.paths_per_realization, False)
+        assert task.fields["status"].endswith("starting")
+        clock[0] += 2.0 + 7.0  # the next unit traced in 2 s, and 7 s of compiling meanwhile
+        watch.seconds = 7.0
+        progress.advance(plan.units[4], plan.paths_per_realization, False)
         status = task.fields["status"]
     assert task.description == "tracing"
-    assert status == (f"4/{UNITS} units, {4 * plan.paths_per_realization // 2:,} of {plan.paths:,} paths per "
-                      f"incidence, {2.0 * (UNITS - 4):.0f} s left")
+    assert status == (f"5/{UNITS} units, {5 * plan.paths_per_realization // 2:,} of {plan.paths:,} paths per "
+                      f"incidence, {2.0 * (UNITS - 5):.0f} s left")
 
 
 def kept_units(config: Path, out: Path) -> list[str]:
