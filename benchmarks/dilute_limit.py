@@ -30,7 +30,7 @@ import numpy as np
 
 from microsim import config as config_module
 from microsim import models, runner
-from microsim.boolean_model import free_path, number_density, radius_over_free_path
+from microsim.physics.boolean_model import free_path, number_density, radius_over_free_path
 from microsim.models.radiative_transfer import single_scattering
 from microsim.sensor import Sensor, cell_index
 

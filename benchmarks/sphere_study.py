@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from microsim import compare, config, models, runner, tables
-from microsim.boolean_model import radius_over_free_path
+from microsim.physics.boolean_model import radius_over_free_path
 from microsim.fit import fit
 from microsim.models.radiative_transfer import single_scattering
 from microsim.sensor import Sensor

@@ -13,7 +13,7 @@ of --repeats:
 2. new backend (``direct``: numba calls Embree, fused kernel) on exact native spheres (grains:
    native spheres in the instance of their unit frame): the same
    number of paths with 1 and 2 threads, segments/s and paths/s. One more trace logs every query
-   in the order the kernel makes them (``FusedBackend(log_rays=...)``); they are replayed
+   in the order the kernel makes them (``DirectBackend(log_rays=...)``); they are replayed
    through rtcIntersect1 alone, in that order: raw direct rays/s, and
    ``direct_ratio_per_thread`` = segments/s with 1 thread / raw direct rays/s on the same rays,
    and ``direct_outside_embree_ns_per_segment``, the tracer's time beyond the replay's per segment
@@ -49,9 +49,9 @@ import numpy as np
 from microsim import config as config_module
 from microsim import runner
 from microsim.integrators.records import SEGMENTS, Beam
-from microsim.integrators.fused import FusedBackend
-from microsim.integrators.wavefront import WavefrontBackend, embree_scene
-from microsim.rng import geometry_rng, stream_key
+from microsim.integrators.direct import DirectBackend
+from microsim.integrators.embreex import EmbreexBackend, embree_scene
+from microsim.physics.rng import geometry_rng, stream_key
 from microsim.sensor import Sensor
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -92,7 +92,7 @@ def realization(cfg, **scene_keys):
 def wavefront_trace(scene, sensor, run, beam):
     """Trace ``beam`` with the wavefront loop on ``run``; (seconds, tally, recorder)."""
     recorder = Recorder(run)
-    backend = WavefrontBackend(scene, embree=recorder)
+    backend = EmbreexBackend(scene, embree=recorder)
     start = time.perf_counter()
     tally = backend.trace(beam, scene.arrays(), sensor)
     return time.perf_counter() - start, tally, recorder
@@ -109,7 +109,7 @@ def replay(batches, run) -> float:
 
 
 def replay_direct(logger) -> float:
-    """Seconds raw Embree takes on the queries of ``logger`` (a FusedBackend that kept a ray log),
+    """Seconds raw Embree takes on the queries of ``logger`` (a DirectBackend that kept a ray log),
     in their order: the log is copied into columns and the hits written once before the clock,
     so that the replay times Embree alone (module doc)."""
     log = [np.ascontiguousarray(c) for c in (logger.ray_log[:, :3], logger.ray_log[:, 3:6], logger.ray_log[:, 6])]
@@ -119,7 +119,7 @@ def replay_direct(logger) -> float:
 
 def fused_trace(scene, sensor, beam, threads: int, log_rays: int = 0):
     """(seconds, tally, backend) of the direct backend tracing ``beam``."""
-    backend = FusedBackend(scene, threads, log_rays)
+    backend = DirectBackend(scene, threads, log_rays)
     start = time.perf_counter()
     tally = backend.trace(beam, scene.arrays(), sensor)
     return time.perf_counter() - start, tally, backend

@@ -36,10 +36,11 @@ import numpy as np
 import geometry
 from microsim import config, embree, runner, tables
 from microsim.integrators.records import SEGMENTS
+from microsim.integrators import vcavity
 from microsim.integrators.vcavity import VCavityTracer, meet_analytic
-from microsim.integrators.wavefront import embree_scene
+from microsim.integrators.embreex import embree_scene
 from microsim.plots import incidence_plane_cells
-from microsim.rng import stream_key
+from microsim.physics.rng import stream_key
 from microsim.sensor import Sensor
 from report import OUT, save_figures
 
@@ -86,10 +87,10 @@ def side_by_side(paths: int, repeats: int) -> dict:
         t.trace(wi, 1000, stream_key(1, 0, 0), 0)
     logger = tracer("embree", sensor, log_rays=1)
     logger.trace(wi, 10, stream_key(1, 0, 0), 0)
-    canonical = embree.Scene(geometry.vcavities.CANONICAL_VERTICES, geometry.vcavities.CANONICAL_FACES)
+    canonical = embree.Scene(vcavity.CANONICAL_VERTICES, vcavity.CANONICAL_FACES)
     canonical.intersect(logger.ray_log[:, :3], logger.ray_log[:, 3:6], logger.ray_log[:, 6])
     analytic_replay(logger.ray_log[:, :3], logger.ray_log[:, 3:6])
-    embreex = embree_scene(geometry.vcavities.CANONICAL_VERTICES, geometry.vcavities.CANONICAL_FACES)
+    embreex = embree_scene(vcavity.CANONICAL_VERTICES, vcavity.CANONICAL_FACES)
     best, segments = {}, {}
     key = stream_key(1, 0, 0)  # every repeat traces the same paths: its segments are those of the best time
     for _ in range(repeats):

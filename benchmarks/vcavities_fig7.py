@@ -10,7 +10,7 @@ where the Oren-Nayar model stops holding.
     polar map of the inter-reflected share (f_inf - f1) / f_inf there. Printed per material and
     incidence: the albedos of f1, f2 and f_inf.
 (b) Oren-Nayar against V-cavities with the gaussian distribution of Eq. 13 (the one the paper says
-    Oren and Nayar use; roughness = sigma in rad, ``microsim.models.distributions``), Lambertian
+    Oren and Nayar use; roughness = sigma in rad, ``microsim.physics.distributions``), Lambertian
     facets of albedo 0.8, sigma from 0.1 to 1.2 rad, theta_i in {0, 30, 60, 80} deg, 3240 cells,
     --paths per incidence: ``microsim.compare`` of the cell-averaged model against the table,
     median |rel| over the cells with signal (table > 3 standard errors) and the directional

@@ -5,7 +5,7 @@ in mean free paths), single-scattering albedo c = ``[material] albedo`` (``kind 
 the scatterer's albedo) and the phase function ``phase``:
 
 - ``lambert_sphere``: the phase function of a Lambertian sphere, lambert_sphere_brdf.txt Eq. 1,
-  what the analytic Lambert-sphere BRDF approximates (``microsim.models.phase``);
+  what the analytic Lambert-sphere BRDF approximates (``microsim.physics.phase``);
 - ``isotropic``: 1 / (4 pi), whose half space has Chandrasekhar's closed form (``rte_isotropic``).
 
 The albedo is in the table's config (a run of several albedos traces the largest, CONVENTIONS 4).
@@ -18,34 +18,20 @@ is in the table's ``scene/`` attrs.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal, NamedTuple
+from typing import Literal
 
 import numpy as np
 from pydantic import Field
 
+from microsim.integrators.medium import Medium
+from microsim.physics.phase import PHASES
 from microsim.schema import Section
 
 KIND = "halfspace_medium"
 INTEGRATOR = "medium"
-PHASES = ("isotropic", "lambert_sphere")
-#: how each phase function is sampled (stored in scene/phase_sampling)
-PHASE_SAMPLING = {
-    "isotropic": "exact: mu = 1 - 2 xi",
-    "lambert_sphere": "exact: lambert_sphere_brdf.txt Eq. 5 (three uniforms)",
-}
-
-
 class Config(Section):
     kind: Literal["halfspace_medium"]
-    phase: Literal["isotropic", "lambert_sphere"] = Field(
-        "lambert_sphere", description="phase function of the point scatterers")
-
-
-class Medium(NamedTuple):
-    """What the medium kernels read: the phase function (index of PHASES) and the albedo."""
-
-    phase: int
-    albedo: float
+    phase: Literal[tuple(PHASES)] = Field("lambert_sphere", description="phase function of the point scatterers")
 
 
 @dataclass
@@ -71,7 +57,7 @@ def for_backend(config, backend: str):
 
 def resolve(config) -> dict:
     phase = config.scene.phase
-    return {"kind": KIND, "phase": phase, "phase_sampling": PHASE_SAMPLING[phase], "mean_free_path": 1.0,
+    return {"kind": KIND, "phase": phase, "phase_sampling": PHASES[phase].sampling, "mean_free_path": 1.0,
             "triangles": 0, "max_mesh_error": 0.0}
 
 
@@ -82,4 +68,4 @@ def scene_bytes(resolved: dict) -> int:
 
 def generate(resolved: dict, config, rng: np.random.Generator) -> HalfspaceMedium:
     """The medium of a realization: its law only (the scatterers' albedo: the largest of a list)."""
-    return HalfspaceMedium(Medium(PHASES.index(resolved["phase"]), max(config.material.albedos)), dict(resolved))
+    return HalfspaceMedium(Medium(PHASES[resolved["phase"]].code, max(config.material.albedos)), dict(resolved))

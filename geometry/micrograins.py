@@ -4,7 +4,7 @@ Grains are the upper halves of ellipsoids of vertical semi-axis 1 and lateral se
 1/beta_x, 1/beta_y (aligned with x and y), with centres a Poisson process on the base plane z = 0
 of density rho = lambda beta_x beta_y / pi, lambda = -ln(1 - tau0), so that a fraction tau0 of
 the base is covered (papers/micrograin_bsdf_anisotropic.txt, Eq. 8-9; the relations are in
-:mod:`microsim.boolean_model`, shared with the ``micrograin`` model). Grains overlap freely. The
+:mod:`microsim.physics.boolean_model`, shared with the ``micrograin`` model). Grains overlap freely. The
 grains are made of ``[material]``, the plane of ``[base]`` (default: an absorber).
 
 Exact grains (the default). Every grain is the same ellipsoid, so the map (x, y, z) ->
@@ -67,7 +67,7 @@ import numpy as np
 import pydantic
 from pydantic import Field
 
-from microsim.boolean_model import grain_density, grain_extinction
+from microsim.physics.boolean_model import grain_density, grain_extinction
 from microsim.materials import Absorber
 from microsim.scene import Scene, SceneBuilder
 from microsim.schema import Section

@@ -6,7 +6,7 @@ projected to its far side.
 
 Spheres of radius r = 1 may overlap. Volume fraction phi = 1 - exp(-n 4/3 pi), so the number
 density is n = -ln(1 - phi) / (4/3 pi) and the free path in the void is exponential with mean
-l = 1 / (n pi) = 4 / (-3 ln(1 - phi)) (both from :mod:`microsim.boolean_model`).
+l = 1 / (n pi) = 4 / (-3 ln(1 - phi)) (both from :mod:`microsim.physics.boolean_model`).
 
 By default every sphere is exact: Embree's native sphere primitive (one x, y, z, r each),
 which the direct Embree backend traces (``sphere_model = "exact"`` in the table). Given
@@ -72,7 +72,7 @@ from pydantic import Field
 from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation
 
-from microsim.boolean_model import free_path, number_density
+from microsim.physics.boolean_model import free_path, number_density
 from microsim.scene import Scene, SceneBuilder
 from microsim.schema import Section
 from microsim.shapes import Shapes

@@ -4,13 +4,13 @@ The surface is a mosaic of grooves much longer than wide, all rims at z = 0. A g
 facets, m and its mirror image m' = (-m_x, -m_y, m_z) through the vertical plane along the
 groove (the groove's axis is horizontal and perpendicular to m). ``distribution`` (beckmann |
 ggx | gaussian) and ``roughness`` or ``roughness_x`` + ``roughness_y`` mean exactly what they
-mean in the ``microfacet`` model (:mod:`microsim.models.distributions`), so a table and a model
+mean in the ``microfacet`` model (:mod:`microsim.physics.distributions`), so a table and a model
 with the same keys describe the same surface.
 
 Layout: one groove per path, drawn afresh. A ray from above crosses the rim plane z = 0 at a
 uniform point, so the groove it enters is drawn in proportion to the horizontal area grooves
 cover, which is their facets' projected area: the groove's facet m is drawn from D(m)(m.n)
-(:func:`microsim.models.distributions.sample_slope`), and since every D offered is even,
+(:func:`microsim.physics.distributions.sample_slope`), and since every D offered is even,
 D(m') = D(m), the facets m and m' of all grooves together have projected-area density D(m)(m.n).
 The groove is infinitely long and a V is scale-free, so the path is traced in the groove's
 cross-section of half-width 1 and depth tan(theta_m) from a uniform point of its aperture; its
@@ -54,28 +54,21 @@ Every resolved value is stored in the table's ``scene/`` attrs, with ``layout`` 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal, NamedTuple
+from typing import Literal
 
 import numpy as np
 import pydantic
 from pydantic import Field
 
+from microsim.integrators.vcavity import CANONICAL_FACES, Grooves
 from microsim.materials import row_length
-from microsim.models import distributions as nd
+from microsim.physics import distributions as nd
 from microsim.schema import Section
 
 KIND = "vcavities"
 INTEGRATOR = "vcavity"
 INTERSECTORS = ("analytic", "embree")
 LAYOUT = "one infinitely long groove per path, its facet m drawn from D(m)(m.n)"
-
-#: the canonical groove the Embree intersector traces: half-width 1 in x, depth 1, y in [-1, 1]
-#: (a ray's axial motion is dropped, so it never leaves y = 0); left facet (normal +x side) first
-CANONICAL_VERTICES = np.array([[-1, -1, 0], [0, -1, -1], [0, 1, -1], [-1, 1, 0], [1, -1, 0], [1, 1, 0]], np.float32)
-CANONICAL_FACES = np.array([[0, 1, 2], [0, 2, 3], [1, 4, 5], [1, 5, 2]], np.int32)
-#: triangles of CANONICAL_FACES that make the left facet (the facet m); the others make m'
-LEFT_FACET_TRIANGLES = 2
-
 
 class Config(Section):
     kind: Literal["vcavities"]
@@ -113,17 +106,6 @@ class Config(Section):
         if self.roughness is not None:
             return self.roughness, self.roughness
         return self.roughness_x, self.roughness_y
-
-
-class Grooves(NamedTuple):
-    """What the V-cavity kernels read: the distribution (code of ``distributions.DISTRIBUTIONS``),
-    its two roughnesses, and the facets' material (kind code, parameter row)."""
-
-    distribution: int
-    roughness_x: float
-    roughness_y: float
-    material_code: int
-    material_params: np.ndarray
 
 
 @dataclass

@@ -4,7 +4,7 @@ An executor is a function ``execute(plan, units, emit, workers, scheduler)`` tha
 units (realization r, incidence i) it is given and calls ``emit(unit, tally, scene_info)`` in
 the main process as each one ends, in any order. It knows nothing of the reduction: the runner
 sums tallies in unit order whatever their order of arrival, and a unit's tally depends only on
-(seed, r, i) (:mod:`microsim.rng`), so every executor writes the same table bit for bit.
+(seed, r, i) (:mod:`microsim.physics.rng`), so every executor writes the same table bit for bit.
 
 - ``local``: in this process (one block of units), or on forked worker processes, one
   contiguous block each (a worker builds each realization of its block once).
@@ -35,7 +35,7 @@ from itertools import groupby
 import numpy as np
 
 from . import interrupts
-from .rng import geometry_rng, stream_key
+from .physics.rng import geometry_rng, stream_key
 
 #: Linux prctl option: the signal a process gets when its parent dies
 PR_SET_PDEATHSIG = 1

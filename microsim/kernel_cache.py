@@ -1,4 +1,5 @@
-"""numba's on-disk cache of microsim's kernels, invalidated by any change to microsim's sources.
+"""numba's on-disk cache of microsim's kernels, invalidated by any change to the sources a kernel
+can carry: microsim's and geometry's.
 
 numba stamps a cached kernel with the source of its own file only, but a kernel carries the
 machine code of the kernels it calls from other modules (inlined or linked) and the values of
@@ -6,8 +7,9 @@ their module constants: after an edit of ``materials.scatter`` alone, the cached
 the surface tracer would keep running the old ``scatter``. :func:`install` wraps each of numba's
 cache locators, in numba's own order (so ``NUMBA_CACHE_DIR`` and read-only installs behave as
 usual), so that a kernel defined in the microsim package, or in the checkout's benchmarks/ and
-tests/ (which call them), is stamped with its own file's stamp and the hash of every microsim
-source: any edit of microsim recompiles them all (over a minute; README, numba caches).
+tests/ (which call them), is stamped with its own file's stamp and the hash of every source of
+microsim and of geometry (its generators hand kernels their records and constants): any edit of
+either recompiles them all (README, numba caches).
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ import hashlib
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parent
+#: the packages whose sources the stamp covers: microsim, and the scene generators beside it
+STAMP_SOURCES = (PACKAGE, PACKAGE.parent / "geometry")
 #: files whose kernels get the package stamp: the package, and the checkout's callers of it
 STAMPED = (PACKAGE, PACKAGE.parent / "benchmarks", PACKAGE.parent / "tests")
 
@@ -49,7 +53,7 @@ class PackageStamped:
         stamp = super().get_source_stamp()
         py_file = getattr(self, "_py_file", None)
         if py_file is not None and is_stamped(Path(py_file)):
-            return stamp, package_stamp()
+            return stamp, *(package_stamp(root) for root in STAMP_SOURCES)
         return stamp
 
 

@@ -3,19 +3,30 @@
 A material kind is defined once, as a config section below (Mitsuba 3's one plugin, one place):
 its ``kind`` name and parameters with their accepted ranges (the ``[material]`` / ``[base]``
 tables of CONVENTIONS 4, validated by :mod:`microsim.config`), its kind ``code``, its parameter
-row (the parameters in the order they are declared, read by position in :func:`scatter`) and
-its ``albedo_bound`` (used by generators for default slab depths). Defining a subclass
-registers it in ``MATERIALS`` (define kinds here: the config schema is built from the registry
-when :mod:`microsim.config` is imported); the config schema, the scene's material table and the
-generators all derive from that registry. Each definition is followed by the module constant of its code,
-the name :func:`scatter` compares with (numba reads module globals, not class attributes). A
-new kind costs its definition and one branch of :func:`scatter`; a code that no definition
-holds is refused when a material table is built, and :func:`scatter` raises rather than fall
-through.
+row (the parameters in the order they are declared, and what the kernels derive from them once,
+read by position) and its ``albedo_bound`` (used by generators for default slab depths).
+Defining a subclass registers it in ``MATERIALS`` (define kinds here: the config schema is built
+from the registry when :mod:`microsim.config` is imported); the config schema, the scene's
+material table and the generators all derive from that registry. Each definition is followed by
+the module constant of its code, the name the kernels compare with (numba reads module globals,
+not class attributes). A new kind costs its definition and one branch in each of the three
+kernels; a code that no definition holds is refused when a material table is built, and the
+kernels raise rather than fall through. ``tests/test_materials.py`` checks every registered kind's
+sampling against its ``evaluate`` and ``pdf`` (a chi-square test on the hemisphere).
 
-:func:`scatter` samples the outgoing direction of one interaction exactly (the sampled density
-equals BSDF * cos / weight) and returns the factor by which the path weight is multiplied; 0
-ends the path (absorbed).
+The three kernels of one interaction, as pbrt's BxDFs and Mitsuba 3's BSDFs have them, with
+``wi`` pointing away from the surface towards where the light came from (``wi = -d``), ``wo``
+away from it, ``n`` the outward unit shading normal, all unit 3-tuples:
+
+- :func:`scatter` samples the outgoing direction exactly and returns the factor by which the
+  path weight is multiplied (0 ends the path: absorbed), and the fraction cut short;
+- :func:`evaluate` is f(wi, wo) |n . wo|, of the lobes that are not a Dirac delta (zero for a
+  mirror, a conductor, the smooth interface's reflection): what a point estimate at a direction
+  (next-event estimation) adds;
+- :func:`pdf` is the density per solid angle with which :func:`scatter` draws ``wo`` outside its
+  delta lobes (it integrates to 1 less their probability). Where a kind's weight is a fixed
+  function of the directions, it is evaluate / pdf; where it is random (the interfaced body's
+  bounces), its mean is.
 """
 
 from __future__ import annotations
@@ -29,9 +40,9 @@ import numpy as np
 import pydantic
 from pydantic import Field
 
-from .fresnel import fresnel_conductor, fresnel_dielectric
-from .rng import uniform
-from .sampling import from_local, reflect, sample_cosine
+from .physics.fresnel import fresnel_conductor, fresnel_dielectric, internal_diffuse_reflectance
+from .physics.rng import uniform
+from .physics.sampling import from_local, reflect, sample_cosine
 from .schema import Section
 
 #: kind name -> definition, in the order of definition
@@ -46,9 +57,11 @@ _CONDUCTOR_PROBES = 101
 
 
 class Material(Section):
-    """A material kind: ``kind``, then its parameters in row order; ``code`` for the tracer."""
+    """A material kind: ``kind``, then its parameters in row order; ``code`` for the tracer;
+    ``example``, parameters of one instance, which the tests check the kind's kernels with."""
 
     code: ClassVar[int]
+    example: ClassVar[dict]
 
     @classmethod
     def __pydantic_init_subclass__(cls, **kwargs):
@@ -58,7 +71,15 @@ class Material(Section):
             raise TypeError(f"material kind {name!r} needs an integer code (code: ClassVar[int] = ...)")
         if name in MATERIALS or cls.code in codes():
             raise TypeError(f"material kind {name!r} (code {cls.code}) is defined twice")
+        if not isinstance(getattr(cls, "example", None), dict):
+            raise TypeError(f"material kind {name!r} needs an example (example: ClassVar[dict] = {{parameters}})")
         MATERIALS[name] = cls
+
+    @classmethod
+    def example_instance(cls) -> "Material":
+        """The kind made with its ``example`` parameters."""
+        kind = typing.get_args(cls.model_fields["kind"].annotation)[0]
+        return cls.model_validate({"kind": kind, **cls.example})
 
     @classmethod
     def parameter_names(cls) -> tuple[str, ...]:
@@ -67,6 +88,11 @@ class Material(Section):
     def row(self) -> tuple[float, ...]:
         """The parameters in declaration order: the material's row of a scene's material table."""
         return tuple(float(getattr(self, name)) for name in self.parameter_names())
+
+    @classmethod
+    def row_size(cls) -> int:
+        """Entries of the kind's row: its parameters, and what the kernels derive from them."""
+        return len(cls.parameter_names())
 
     def albedo_bound(self) -> float:
         """An upper estimate of the weight factor of one interaction (for default slab depths):
@@ -80,8 +106,8 @@ def codes() -> set[int]:
 
 
 def row_length() -> int:
-    """Width of a material table row: the largest parameter count of any kind."""
-    return max(len(m.parameter_names()) for m in MATERIALS.values())
+    """Width of a material table row: the longest row of any kind."""
+    return max(m.row_size() for m in MATERIALS.values())
 
 
 class Absorber(Material):
@@ -89,6 +115,7 @@ class Absorber(Material):
 
     kind: Literal["absorber"]
     code: ClassVar[int] = 0
+    example: ClassVar[dict] = {}
 
     def albedo_bound(self) -> float:
         return 0.0
@@ -108,6 +135,7 @@ class Lambert(Material):
     albedo: float | list[float] = Field(description="Lambertian albedo in [0, 1], or a list of them: every "
                                                     "albedo from one run")
     code: ClassVar[int] = 1
+    example: ClassVar[dict] = {"albedo": 0.7}
 
     @pydantic.field_validator("albedo", mode="before")
     @classmethod
@@ -143,12 +171,13 @@ LAMBERT = Lambert.code
 
 class Conductor(Material):
     """Smooth metal with complex index eta + i k: mirror reflection, weight x Fresnel reflectance
-    (exact unpolarised form, :mod:`microsim.fresnel`)."""
+    (exact unpolarised form, :mod:`microsim.physics.fresnel`)."""
 
     kind: Literal["conductor"]
     eta: float = Field(gt=0.0, le=100.0, description="real part of the complex index")
     k: float = Field(ge=0.0, le=100.0, description="imaginary part of the complex index")
     code: ClassVar[int] = 2
+    example: ClassVar[dict] = {"eta": 0.2, "k": 3.0}
 
     def albedo_bound(self) -> float:
         cosines = np.linspace(0.0, 1.0, _CONDUCTOR_PROBES)
@@ -169,10 +198,20 @@ class InterfacedLambert(Material):
     albedo: float = Field(ge=0.0, le=1.0, description="albedo K_d of the Lambertian body")
     eta: float = Field(ge=1.0, le=4.0, description="refractive index ratio n_i of the interface")
     code: ClassVar[int] = 3
+    example: ClassVar[dict] = {"albedo": 0.7, "eta": 1.5}
 
     def albedo_bound(self) -> float:
         f0 = fresnel_dielectric(1.0, self.eta)
         return min(1.0, f0 + (1.0 - f0) * self.albedo)
+
+    def row(self) -> tuple[float, ...]:
+        """albedo, eta, and the body's internal diffuse reflectance r_i (Eq. 9-10): the chance that
+        light inside is sent back by the interface, which :func:`evaluate` and :func:`pdf` read."""
+        return self.albedo, self.eta, internal_diffuse_reflectance(self.eta)
+
+    @classmethod
+    def row_size(cls) -> int:
+        return 3
 
 
 INTERFACED_LAMBERT = InterfacedLambert.code
@@ -183,6 +222,7 @@ class Mirror(Material):
 
     kind: Literal["mirror"]
     code: ClassVar[int] = 4
+    example: ClassVar[dict] = {}
 
 
 MIRROR = Mirror.code
@@ -208,6 +248,47 @@ def scatter(code, prm, states, i, d, n):
     if code == ABSORBER:
         return d, 0.0, 0.0
     raise ValueError("scatter: unknown material kind code")
+
+
+@numba.njit(cache=True, error_model="numpy", _nrt=False, inline="always")
+def evaluate(code, prm, wi, wo, n):
+    """f(wi, wo) |n . wo| of the material's lobes that are not a Dirac delta (module doc)."""
+    return _continuous_lobes(code, prm, prm[0], wi, wo, n)
+
+
+@numba.njit(cache=True, error_model="numpy", _nrt=False, inline="always")
+def pdf(code, prm, wi, wo, n):
+    """Density per solid angle with which :func:`scatter` draws wo outside its delta lobes: the
+    sampler draws directions as the white material would send them (the albedo goes into the
+    weight), so the pdf is :func:`evaluate` of the kind with albedo 1."""
+    return _continuous_lobes(code, prm, 1.0, wi, wo, n)
+
+
+@numba.njit(cache=True, error_model="numpy", _nrt=False, inline="always")
+def _continuous_lobes(code, prm, albedo, wi, wo, n):
+    """f |n . wo| of the lobes that are not a delta, with the diffuse kinds' albedo ``albedo``."""
+    cos_i = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
+    cos_o = wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2]
+    if cos_i <= 0.0 or cos_o <= 0.0:
+        return 0.0
+    if code == LAMBERT:
+        return albedo * cos_o / math.pi
+    if code == INTERFACED_LAMBERT:
+        return _interfaced_lambert_body(albedo, prm[1], prm[2], cos_i, cos_o) * cos_o
+    if code == CONDUCTOR or code == MIRROR or code == ABSORBER:
+        return 0.0
+    raise ValueError("evaluate: unknown material kind code")
+
+
+@numba.njit(cache=True, error_model="numpy", _nrt=False)
+def _interfaced_lambert_body(albedo, eta, r_i, cos_i, cos_o):
+    """The body term of the flat interfaced Lambertian, interfaced_lambertian_microfacets.txt
+    Eq. 8 at m = n: K_d T(mu_i) T(mu_o) / (pi eta^2 (1 - K_d r_i)), T = 1 - F. It is what the
+    bounce-by-bounce sampler of :func:`_interfaced_lambert` gives on average: light enters with
+    chance T(mu_i), each bounce multiplies the weight by K_d and leaves with chance 1 - r_i, in a
+    direction of density T cos_t / pi inside, cos_t d(omega_t) = cos_o d(omega_o) / eta^2 out."""
+    transmitted = (1.0 - fresnel_dielectric(cos_i, eta)) * (1.0 - fresnel_dielectric(cos_o, eta))
+    return albedo * transmitted / (math.pi * eta * eta * (1.0 - albedo * r_i))
 
 
 @numba.njit(cache=True, error_model="numpy", _nrt=False)

@@ -28,9 +28,9 @@ import geometry
 
 from .frames import direction
 from . import embree, executors, integrators
-from .rng import stream_key
+from .physics.rng import stream_key
 from .compile_watch import CompileWatch
-from .integrators import fused, wavefront
+from .integrators import embreex, scheduler
 from .integrators.records import BASE_ROW, COUNT_NAMES, ENERGY_NAMES, ORDERS, RESULT_ALL_ORDERS, RESULT_ROWS, \
     SINGLE_ALBEDO, TALLY_ROWS, per_albedo
 from .sensor import Sensor
@@ -280,9 +280,9 @@ def memory_estimate(plan: Plan, sensor: Sensor, workers: int, spawned: bool = Fa
     and buffers the tallies of units that arrive early (up to all but one worker's share)."""
     tally = max(1, len(plan.albedos)) * TALLY_ROWS * sensor.tally_width * 8
     if plan.backend == "embreex":
-        paths = min(plan.paths_per_realization, wavefront.BATCH_PATHS) * PATH_ROW_BYTES
+        paths = min(plan.paths_per_realization, embreex.BATCH_PATHS) * PATH_ROW_BYTES
     else:
-        paths = fused.WAVE_CHUNKS_PER_THREAD * plan.threads * (tally + 1024)
+        paths = scheduler.WAVE_CHUNKS_PER_THREAD * plan.threads * (tally + 1024)
     tracing = plan.generator.scene_bytes(plan.scene) + paths + 2 * tally
     units = len(plan.units)
     processes = len(executors.split(plan.units, max(1, workers)))

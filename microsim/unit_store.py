@@ -30,7 +30,6 @@ from pathlib import Path
 
 import numpy as np
 
-import geometry
 
 from . import __version__, kernel_cache
 from .integrators.records import Tally
@@ -61,7 +60,7 @@ def fingerprint(plan) -> dict:
         "config": plan.config.model_dump(mode="json", exclude_none=True),
         "backend": plan.backend,
         "microsim_version": __version__,
-        "sources": kernel_cache.package_stamp().hex() + kernel_cache.package_stamp(Path(geometry.__file__).parent).hex(),
+        "sources": "".join(kernel_cache.package_stamp(root).hex() for root in kernel_cache.STAMP_SOURCES),
     }
 
 

@@ -14,7 +14,7 @@ import pytest
 
 from microsim import config, embree, runner, tables
 from microsim.cli import main
-from microsim.integrators import fused
+from microsim.integrators import scheduler
 
 
 def spheres(backend: str, paths: int = 24_000, **scene) -> dict:
@@ -37,7 +37,7 @@ def test_direct_backend_traces_the_same_paths_as_embreex_on_triangles():
 
 
 def test_tables_are_bit_identical_for_any_thread_count():
-    paths = 2 * fused.WAVE_CHUNKS_PER_THREAD * fused.CHUNK_PATHS + 3 * fused.CHUNK_PATHS + 17  # 3 waves of one thread
+    paths = 2 * scheduler.WAVE_CHUNKS_PER_THREAD * scheduler.CHUNK_PATHS + 3 * scheduler.CHUNK_PATHS + 17  # 3 waves of one thread
     cfg = config.validate(spheres("direct", paths=paths))  # and a partial chunk
     one = runner.run(cfg, threads=1)
     for threads in (2, 3):  # 3: shares of a wave that differ in size

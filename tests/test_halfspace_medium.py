@@ -17,12 +17,13 @@ import pytest
 from microsim import config, models, runner
 from microsim.compare import cell_averages
 from microsim.frames import direction
-from microsim.integrators.medium import ISOTROPIC, LAMBERT_SPHERE, MediumTracer, scatter_direction
+from microsim.integrators.medium import MediumTracer, scatter_direction
+from microsim.physics.phase import ISOTROPIC, LAMBERT_SPHERE
 from microsim.models import hfunctions as hf
-from microsim.models.phase import phase_lambert_sphere, phase_lambert_sphere_cdf
+from microsim.physics.phase import phase_lambert_sphere, phase_lambert_sphere_cdf
 from microsim.models.quadrature import directional_albedo
 from microsim.models.radiative_transfer import single_scattering
-from microsim.rng import path_state
+from microsim.physics.rng import path_state
 from refusals import assert_run_refused, small_config
 from stat_bounds import chi2_bound, chi2_lower_bound
 from thread_identity import assert_bit_identical_for_threads
@@ -108,7 +109,7 @@ def test_isotropic_medium_is_chandrasekhars_closed_form(albedo, paths, cells):
     assert_matches(result, 4, model)
     for i in range(3):
         mu = result.plan.incidence_direction(i)[2]
-        expected = 1.0 - hf.h_function(hf.ISOTROPIC, albedo, mu) * math.sqrt(1.0 - albedo)
+        expected = 1.0 - hf.h_function(hf.ISOTROPIC_MODE, albedo, mu) * math.sqrt(1.0 - albedo)
         assert abs(result.albedo[i].mean[4] - expected) <= 4 * result.albedo[i].stderr[4]
 
 
@@ -151,8 +152,8 @@ def test_white_medium_returns_every_unit_of_energy():
 def test_isotropic_h_function_by_two_methods(albedo):
     """The Fock formula and Chandrasekhar's integral equation (fixed point) agree to 1e-12."""
     mu = np.linspace(0.0, 1.0, 11)
-    fock = hf.h_function(hf.ISOTROPIC, albedo, mu)
-    np.testing.assert_allclose(fock, hf.h_function_iterated(hf.ISOTROPIC, albedo, mu), rtol=1e-12)
+    fock = hf.h_function(hf.ISOTROPIC_MODE, albedo, mu)
+    np.testing.assert_allclose(fock, hf.h_function_iterated(hf.ISOTROPIC_MODE, albedo, mu), rtol=1e-12)
 
 
 @pytest.mark.parametrize("albedo", [0.0, 0.5, 0.99, 1.0])
@@ -162,7 +163,7 @@ def test_rte_isotropic_albedo_is_one_minus_h_sqrt_one_minus_c(albedo):
     model = models.create("rte_isotropic", albedo=albedo)
     mu = np.array([0.05, 0.3, 0.7, 1.0])
     a = directional_albedo(model, direction(np.arccos(mu), 0.0), 128, 64)
-    expected = 1.0 - hf.h_function(hf.ISOTROPIC, albedo, mu) * math.sqrt(1.0 - albedo)
+    expected = 1.0 - hf.h_function(hf.ISOTROPIC_MODE, albedo, mu) * math.sqrt(1.0 - albedo)
     np.testing.assert_allclose(a, expected, atol=1e-6)
 
 

@@ -1,6 +1,7 @@
 """numba caches of microsim's kernels carry a stamp of every microsim source (microsim/kernel_cache.py)."""
 
 import os
+from pathlib import Path
 
 from numba.core import caching
 
@@ -29,7 +30,8 @@ def test_every_numba_locator_adds_the_package_stamp_for_microsim_files_only(tmp_
         return 0
 
     inside = in_tree.from_function(kernel, kernel_cache.__file__)
-    assert inside.get_source_stamp()[1] == package_stamp()
+    assert inside.get_source_stamp()[1:] == tuple(package_stamp(root) for root in kernel_cache.STAMP_SOURCES)
+    assert kernel_cache.STAMP_SOURCES[1].name == "geometry"
     outside_file = tmp_path / "elsewhere.py"
     outside_file.write_text("def kernel():\n    return 0\n")
     outside = in_tree.from_function(kernel, str(outside_file))
@@ -65,3 +67,34 @@ print(compiled)
                           env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)})
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "[]"
+
+
+def test_an_edit_of_a_generator_recompiles_the_kernels(tmp_path):
+    """Issue 25: the stamp covered microsim/ only, yet a kernel carried constants from geometry/
+    (the V-cavity tracer froze a generator's facet table into its machine code). In a copy of the
+    sources, a kernel loads from the cache when nothing changed, and compiles again after an
+    edit of a generator."""
+    import shutil
+    import subprocess
+    import sys
+
+    root = Path(kernel_cache.PACKAGE).parent
+    for package in ("microsim", "geometry"):
+        shutil.copytree(root / package, tmp_path / package, ignore=shutil.ignore_patterns("__pycache__"))
+    code = ("from microsim.compile_watch import CompileWatch\n"
+            "with CompileWatch() as watch:\n"
+            "    from microsim.physics.rng import stream_key\n"
+            "    stream_key(1, 2, 3)\n"
+            "print(watch.seconds > 0)")
+
+    def compiles() -> bool:
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path,
+                              env={k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"})
+        assert done.returncode == 0, done.stderr
+        return done.stdout.split()[-1] == "True"
+
+    assert compiles()  # a fresh copy: nothing cached
+    assert not compiles()  # loaded from the cache
+    plane = tmp_path / "geometry" / "plane.py"
+    plane.write_text(plane.read_text() + "\nAN_EDITED_CONSTANT = 1\n")
+    assert compiles()

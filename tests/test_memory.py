@@ -6,9 +6,9 @@ import pytest
 
 from microsim import config, runner, tables
 from microsim.cli import main
-from microsim.integrators import wavefront
+from microsim.integrators import embreex
 from microsim.integrators.surface import SurfaceTracer
-from microsim.rng import geometry_rng
+from microsim.physics.rng import geometry_rng
 from microsim.sensor import Sensor
 
 
@@ -28,7 +28,7 @@ def test_the_embreex_backend_traces_a_unit_in_batches_of_bounded_size(monkeypatc
     scene = plan.generator.generate(plan.scene, plan.config, geometry_rng(1, 0))
     sensor = Sensor.build(100)
     whole = SurfaceTracer(scene, sensor, "embreex").trace(plan.incidence_direction(1), 5000, 7, 0)
-    monkeypatch.setattr(wavefront, "BATCH_PATHS", 1024)
+    monkeypatch.setattr(embreex, "BATCH_PATHS", 1024)
     tracer = SurfaceTracer(scene, sensor, "embreex")
     batched = tracer.trace(plan.incidence_direction(1), 5000, 7, 0)
     assert len(tracer.backend.paths.weight) == 1024  # rows held at once
@@ -41,7 +41,7 @@ def test_the_memory_estimate_does_not_grow_with_paths():
     sensor = Sensor.build(100)
     for backend, scene in (("direct", {}), ("embreex", {"subdivisions": 2})):
         two_batches, huge = (runner.Plan.from_config(spheres(paths, backend, **scene))
-                             for paths in (4 * 2 * wavefront.BATCH_PATHS, 10**12))
+                             for paths in (4 * 2 * embreex.BATCH_PATHS, 10**12))
         assert runner.memory_estimate(huge, sensor, 2) == runner.memory_estimate(two_batches, sensor, 2)
         assert runner.memory_estimate(huge, sensor, 1) < 2**30
 

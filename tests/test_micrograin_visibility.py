@@ -66,7 +66,7 @@ from scipy.spatial import cKDTree
 
 import geometry
 from microsim import config, embree, shapes
-from microsim.boolean_model import grain_density, grain_extinction, unit_space_direction_array
+from microsim.physics.boolean_model import grain_density, grain_extinction, unit_space_direction_array
 from microsim.frames import direction
 from microsim.models import micrograin_geometry as geo
 

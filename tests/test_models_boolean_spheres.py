@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import quad
 
 from microsim import models
-from microsim.boolean_model import number_density, radius_over_free_path
+from microsim.physics.boolean_model import number_density, radius_over_free_path
 from microsim.frames import direction
 from microsim.models.boolean_spheres import common_volume, finite_size_ratio, lit_visible_height, shadow_hiding
 

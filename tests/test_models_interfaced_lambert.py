@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from microsim import models
-from microsim.fresnel import fresnel_dielectric_array
-from microsim.models import distributions as nd
+from microsim.physics import fresnel
+from microsim.physics.fresnel import fresnel_dielectric_array
+from microsim.physics import distributions as nd
 from microsim.models import interfaced_lambert as il
 from microsim.models.microfacet import specular_brdf
 from microsim.frames import direction
@@ -35,16 +36,16 @@ def r_e_by_quadrature(eta):
 
 @pytest.mark.parametrize("eta", [1.01, 1.05, 1.2, 1.33, 1.5, 2.0, 3.0, 5.0, 10.0])
 def test_molenaar_external_reflectance(eta):
-    assert il.external_diffuse_reflectance(eta) == pytest.approx(r_e_by_quadrature(eta), rel=1e-9)
+    assert fresnel.external_diffuse_reflectance(eta) == pytest.approx(r_e_by_quadrature(eta), rel=1e-9)
 
 
 def test_external_reflectance_near_one():
     """Below 1.01 the defining integral replaces Eq. 10; it is continuous and 0 at eta = 1."""
-    assert il.external_diffuse_reflectance(1.0) == 0.0
-    assert il.external_diffuse_reflectance(1.01 - 1e-12) == pytest.approx(il.external_diffuse_reflectance(1.01), rel=1e-9)
+    assert fresnel.external_diffuse_reflectance(1.0) == 0.0
+    assert fresnel.external_diffuse_reflectance(1.01 - 1e-12) == pytest.approx(fresnel.external_diffuse_reflectance(1.01), rel=1e-9)
     for eta in (1.0 + 1e-9, 1.001, 1.005):
-        assert il.external_diffuse_reflectance(eta) == pytest.approx(r_e_by_quadrature(eta), rel=1e-6, abs=1e-15)
-    assert il.internal_diffuse_reflectance(1.0) == 0.0
+        assert fresnel.external_diffuse_reflectance(eta) == pytest.approx(r_e_by_quadrature(eta), rel=1e-6, abs=1e-15)
+    assert fresnel.internal_diffuse_reflectance(1.0) == 0.0
 
 
 @pytest.mark.parametrize("albedo", [0.0, 0.4, 1.0])
@@ -62,7 +63,7 @@ def test_flat_energy_balance(eta, albedo):
     balance with the mirror reflection F(mu_i) exactly. Quadrature 64 x 128 on a smooth integrand."""
     model = models.create("interfaced_lambert", albedo=albedo, eta=eta)
     wi = direction(np.radians([0.0, 40.0, 70.0, 85.0, 89.9]))
-    r_i = il.internal_diffuse_reflectance(eta)
+    r_i = fresnel.internal_diffuse_reflectance(eta)
     t_i = 1.0 - fresnel_dielectric_array(wi[:, 2], eta)
     body = directional_albedo(model, wi)
     np.testing.assert_allclose(body, t_i * albedo * (1.0 - r_i) / (1.0 - r_i * albedo), rtol=1e-8, atol=1e-14)

@@ -15,7 +15,7 @@ from scipy.special import lpmv
 from microsim import models
 from microsim.models import hfunctions as hf
 from microsim.models import lambert_sphere as ls
-from microsim.models.phase import (
+from microsim.physics.phase import (
     legendre_coefficients,
     phase_lambert_sphere,
     phase_lambert_sphere_cdf,

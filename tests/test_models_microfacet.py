@@ -12,8 +12,8 @@ import pytest
 from scipy.special import erf
 
 from microsim import models
-from microsim.fresnel import fresnel, fresnel_array, fresnel_conductor_array, fresnel_dielectric_array
-from microsim.models import distributions as nd
+from microsim.physics.fresnel import fresnel, fresnel_array, fresnel_conductor_array, fresnel_dielectric_array
+from microsim.physics import distributions as nd
 from microsim.models.microfacet import specular_brdf
 from microsim.frames import direction
 from microsim.models.quadrature import directional_albedo
@@ -293,7 +293,7 @@ def test_microfacet_matches_definition():
 
 @pytest.mark.parametrize("eta, k", [(1.5, 0.0), (0.7, 0.0), (1.0152, 6.6273), (0.2, 3.0)])
 def test_fresnel_dispatch_is_dielectric_for_k_zero_else_conductor(eta, k):
-    """microsim.fresnel.fresnel, the one dispatch every model uses, picks its branch exactly
+    """microsim.physics.fresnel.fresnel, the one dispatch every model uses, picks its branch exactly
     (eta = 0.7: total internal reflection below the critical angle)."""
     cos_i = np.linspace(0.0, 1.0, 101)
     expected = fresnel_dielectric_array(cos_i, eta) if k == 0.0 else fresnel_conductor_array(cos_i, eta, k)

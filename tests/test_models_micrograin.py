@@ -15,7 +15,7 @@ from scipy.integrate import quad
 from scipy.special import roots_legendre
 
 from microsim import models
-from microsim.boolean_model import (
+from microsim.physics.boolean_model import (
     grain_density,
     grain_extinction,
     unit_space_direction,
@@ -24,7 +24,7 @@ from microsim.boolean_model import (
     unit_space_height_array,
 )
 from microsim.cli import main
-from microsim.fresnel import fresnel_array, fresnel_conductor_array
+from microsim.physics.fresnel import fresnel_array, fresnel_conductor_array
 from microsim.models import micrograin_geometry as geo
 from microsim.frames import direction
 from microsim.models.quadrature import directional_albedo

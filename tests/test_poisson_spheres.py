@@ -8,8 +8,8 @@ from scipy.spatial import cKDTree
 
 import geometry
 from microsim import config, embree, materials
-from microsim.boolean_model import free_path
-from microsim.rng import geometry_rng
+from microsim.physics.boolean_model import free_path
+from microsim.physics.rng import geometry_rng
 
 SPHERES = geometry.SCENES["poisson_spheres"]
 

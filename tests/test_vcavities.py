@@ -27,11 +27,11 @@ import pytest
 import geometry
 from microsim import config, executors, models, runner
 from microsim.compare import cell_averages
-from microsim.fresnel import fresnel_array
+from microsim.physics.fresnel import fresnel_array
 from microsim.integrators.records import SEGMENTS
 from microsim.integrators.vcavity import VCavityTracer
-from microsim.models import distributions as nd
-from microsim.rng import path_state
+from microsim.physics import distributions as nd
+from microsim.physics.rng import path_state
 from microsim.sensor import Sensor
 from matching_cells import RECIPROCITY_CELLS, reciprocity_z, ring_incidences
 from refusals import assert_run_refused, small_config

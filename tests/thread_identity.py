@@ -5,7 +5,7 @@ import math
 import numpy as np
 
 import geometry
-from microsim.rng import geometry_rng, stream_key
+from microsim.physics.rng import geometry_rng, stream_key
 from microsim.sensor import Sensor
 
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numba
 from numba import literal_unroll
 
-from ..rng import path_state, uniform
+from ..physics.rng import path_state, uniform
 from ..sensor import cell_index, retro_ring
 from .records import ABSORBED, BASE_ROW, ORDERS, ROULETTE_KILLS, TRUNCATED
 

@@ -7,26 +7,31 @@ its weight is multiplied by the albedo c, and its new direction makes the cosine
 old one, mu drawn exactly from the phase function (:func:`scatter_direction`), the azimuth
 about the old direction uniform. Roulette, truncation, orders and tallies are those of every
 integrator (:mod:`.events`). Paths run to completion one at a time, in chunks on threads as
-on the fused surface backend (:func:`microsim.integrators.fused.trace_in_waves`), so a table is
+on the direct surface backend (:func:`microsim.integrators.scheduler.trace_in_waves`), so a table is
 bit-identical for any number of threads.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
 
-from ..models.phase import sample_phase_exact
-from ..rng import uniform
-from ..sampling import from_local
+from ..physics.phase import sample_cosine
+from ..physics.rng import uniform
+from ..physics.sampling import from_local
 from .events import add_interaction, begin_path, exit_top, survives_interaction, truncate
-from .fused import CHUNK_PATHS, chunk_tally, compile_tally_sums, trace_in_waves, wave_rows, workspace
 from .records import SEGMENTS, SINGLE_ALBEDO, Beam
+from .scheduler import CHUNK_PATHS, chunk_tally, compile_tally_sums, trace_in_waves, wave_rows, workspace
 
-#: codes of geometry.halfspace_medium.PHASES
-ISOTROPIC, LAMBERT_SPHERE = 0, 1
+class Medium(NamedTuple):
+    """What the medium kernels read: the phase function (its code in physics.phase.PHASES) and the albedo."""
+
+    phase: int
+    albedo: float
+
 
 
 class MediumTracer:
@@ -53,8 +58,6 @@ class MediumTracer:
     def compile(cls, sensor, backend: str = "direct", threads: int = 1, albedos: int = 1) -> None:
         """Compile (or load) the kernel before workers fork, for runs of ``albedos`` albedos,
         tracing nothing."""
-        from geometry.halfspace_medium import Medium
-
         work = workspace(1, sensor.tally_width, albedos=albedos)
         beam = Beam(np.array([0.0, 0.0, 1.0]), np.uint64(0), 0, 0, np.ones(albedos))
         trace_chunks(0, 0, 0, beam, Medium(0, 0.5), sensor, work)
@@ -99,12 +102,9 @@ def trace_path(paths, row, number, beam, medium, sensor, tally):
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def scatter_direction(phase, states, i, d):
-    """A new unit direction at the cosine mu from d drawn from the phase function (isotropic:
-    mu = 1 - 2 xi; Lambert sphere: Eq. 5 of lambert_sphere_brdf.txt, exact), azimuth uniform."""
-    if phase == LAMBERT_SPHERE:
-        mu = sample_phase_exact(uniform(states, i), uniform(states, i), uniform(states, i))
-    else:
-        mu = 1.0 - 2.0 * uniform(states, i)
+    """A new unit direction at the cosine mu from d drawn from the phase function of code
+    ``phase`` (:func:`microsim.physics.phase.sample_cosine`), azimuth uniform."""
+    mu = sample_cosine(phase, states, i)
     sine = math.sqrt(max(0.0, 1.0 - mu * mu))
     azimuth = 2.0 * math.pi * uniform(states, i)
     return from_local(sine * math.cos(azimuth), sine * math.sin(azimuth), mu, d)

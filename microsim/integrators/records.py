@@ -34,7 +34,7 @@ PATH_FIELDS = {
     "weight": np.float64,
     "order": np.int32,  # interactions so far
     "idle": np.int32,  # segments since the last interaction (side wraps, pass-throughs)
-    "rng": np.uint64,  # state of the path's random stream (microsim.rng)
+    "rng": np.uint64,  # state of the path's random stream (microsim.physics.rng)
     "from_base": np.int8,  # 1 if the first interaction was with the scene's base plane
 }
 Paths = namedtuple("Paths", PATH_FIELDS)

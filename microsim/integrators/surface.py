@@ -1,69 +1,33 @@
-"""The surface tracer: paths through triangles and spheres, one segment and one event at a time.
+"""The surface tracer: the integrator of every scene kind made of triangles and spheres.
 
-A path starts at a uniform point of the tile at ``z_top`` (:func:`start_path`). Each segment is
-stored in float32 as Embree takes it, with its distance ``tfar`` to the boundary of the tile's
-slab and which boundary that is (:func:`prepare_segment`). Embree finds the closest hit on it;
-:func:`follow` takes the path through the event there: a surface hit is projected onto the
-analytic shape (float64), scattered by its material, roulette'd and offset (:func:`interact`);
-a ray that meets a surface from behind passes through (:func:`pass_through`); a ray that reaches
-the tile side wraps to the opposite side (:func:`wrap_side`); one that reaches ``z_top`` leaves
-and is binned on the sensor by scattering order; one that reaches ``z_bottom`` is transmitted.
-These kernels are shared by the two backends (:class:`SurfaceTracer`), which differ only in how
-they call Embree and schedule paths: :mod:`.fused` and :mod:`.wavefront`.
-
-Reference counting: the backends' kernels allocate nothing and are compiled without numba's
-reference-counting runtime (``_nrt=False``), as are the kernels they call without inlining
-(``scatter``, ``surface_point``, ``move_path``; a callee compiled with it would bring its increfs
-along). With it, numba's IR inlining of the event kernels increfs and decrefs every array of
-each bundle passed to them (14 atomic pairs per interaction): for the 1.75 M segments of
-200 000 paths on the phi = 0.3 scene the wavefront kernel took 0.27 s with it and 0.13 s without
-(0.15 s before the bundles). A kernel of the tracer therefore never allocates.
-
-Self-intersection: a scattered ray starts from the hit projected onto the analytic surface (for
-meshed spheres and ellipsoids: onto the mesh's circumscribed surface, outside the own convex
-mesh; native spheres are exact) and offset along the analytic normal by the :func:`clearance`
-max(OFFSET_SIZE x shape size, OFFSET_SPACINGS float32 spacings of the coordinates). Embree may
-still report the own sphere at a tiny distance for a grazing ray, from behind (its exit); a ray
-that meets a surface from behind is inside a solid by round-off (also at the seams of
-overlapping shapes): it passes through and the event is counted. Measured on a native sphere of
-radius 1 at coordinates ~40: 0 own-sphere hits in 200 000 outgoing rays at the clearance, and
-at a 1e-6 offset 2212, every one from behind.
+Its paths and events are :mod:`.surface_transport`'s kernels; its two backends, named as
+``run.backend`` names them, call Embree and schedule paths in two ways: :mod:`.direct` (numba
+calls Embree, paths run to completion, threads) and :mod:`.embreex` (one embreex call per
+segment of all live paths).
 """
 
 from __future__ import annotations
 
-import math
-
-import numba
 import numpy as np
 
-from ..materials import Absorber, scatter
-from ..rng import uniform
+from ..materials import Absorber
 from ..scene import Scene, SceneBuilder
-from ..shapes import surface_point
-from .events import MAX_IDLE_SEGMENTS, add_interaction, begin_path, add_lost, exit_top, survives_interaction, truncate
-from .records import INSIDE_HITS, SINGLE_ALBEDO, TRANSMITTED, Beam
+from . import direct, embreex
+from .records import SINGLE_ALBEDO, Beam
 
-#: segment ends: the tile side (wrap), the top (leave), the bottom (transmitted)
-SIDE_X, SIDE_Y, TOP, BOTTOM = 0, 1, 2, 3
-FLOAT32_EPS = 2.0**-23
-#: a ray leaves a surface at least OFFSET_SIZE x the shape's size and OFFSET_SPACINGS float32
-#: spacings of its coordinates away from it
-OFFSET_SIZE = 1e-6
-OFFSET_SPACINGS = 8.0
-#: a ray passing a back face at a grazing angle is nudged as if at this cosine at least
-MIN_PASS_COSINE = 1e-3
+#: ``run.backend`` -> the module of that backend: ``backend(scene, threads)`` and ``compile_kernels``
+BACKENDS = {"direct": direct, "embreex": embreex}
 
 
 class SurfaceTracer:
     """Traces batches of paths through one realization of a surface scene (the integrator of
     every scene kind made of triangles and spheres), on one of two Embree backends:
 
-    - ``"direct"`` (:mod:`.fused`): numba calls Embree itself; a chunk of paths is traced to
+    - ``"direct"`` (:mod:`.direct`): numba calls Embree itself; a chunk of paths is traced to
       completion in one call, chunks in parallel on ``threads`` threads sharing the scene;
       native spheres;
-    - ``"embreex"`` (:mod:`.wavefront`): one ``embreex.run`` call per segment of every live
-      path, then :func:`advance`; triangles only; one thread. The fallback where the direct
+    - ``"embreex"`` (:mod:`.embreex`): one ``embreex.run`` call per segment of every live
+      path, then :func:`.embreex.advance`; triangles only; one thread. The fallback where the direct
       binding cannot load, and the reference the direct backend is checked against.
     """
 
@@ -79,7 +43,7 @@ class SurfaceTracer:
     def trace(self, wi, n_paths: int, key, max_order: int, albedo_scale=SINGLE_ALBEDO):
         """Trace ``n_paths`` paths arriving along -``wi``; return their :class:`~records.Tally`.
 
-        ``key`` selects the random stream (see :mod:`microsim.rng`); ``max_order`` = 0 means
+        ``key`` selects the random stream (see :mod:`microsim.physics.rng`); ``max_order`` = 0 means
         unlimited, k > 0 truncates a path at its (k+1)-th interaction; ``albedo_scale`` holds
         c_j / c_max for a run of several albedos (:class:`~records.Tally`).
         """
@@ -103,149 +67,7 @@ class SurfaceTracer:
 
 
 def backend_module(name: str):
-    """The module of backend ``name``: ``backend(scene, threads)`` and ``compile_kernels``."""
-    from . import fused, wavefront
-
-    modules = {"direct": fused, "embreex": wavefront}
-    if name not in modules:
-        raise ValueError(f"unknown backend {name!r}; known: {', '.join(modules)}")
-    return modules[name]
-
-
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def start_path(paths, rays, i, number, beam, scene):
-    """Path ``number`` of the beam starts in row i: a uniform point of the tile at z_top, along -wi."""
-    begin_path(paths, i, number, beam.key)
-    x = uniform(paths.rng, i) * scene.tile
-    y = uniform(paths.rng, i) * scene.tile
-    prepare_segment(rays, i, (x, y, scene.z_top), (-beam.wi[0], -beam.wi[1], -beam.wi[2]), scene)
-
-
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def follow(paths, rays, i, hit, scene, sensor, max_order, tally):
-    """Path i traced the segment in row i of ``rays`` and met ``hit`` = (primitive or -1, its
-    distance t, Embree's float32 geometric normal); take it through the event there.
-
-    Returns (alive, origin, direction) of its next segment: a surface hit scatters (or passes a
-    back face, or is truncated by ``max_order``); a miss leaves through the top (binned),
-    the bottom (transmitted) or a tile side (wrapped).
-    """
-    o = (np.float64(rays.origin[i, 0]), np.float64(rays.origin[i, 1]), np.float64(rays.origin[i, 2]))
-    d = (np.float64(rays.direction[i, 0]), np.float64(rays.direction[i, 1]), np.float64(rays.direction[i, 2]))
-    p, t, ng = hit
-    keep = True
-    if p >= 0:
-        h = (o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2])
-        s = scene.prim_shape[p]
-        facing = d[0] * ng[0] + d[1] * ng[1] + d[2] * ng[2]
-        if facing >= 0.0:
-            tally.counts[INSIDE_HITS] += 1
-            o = pass_through(h, d, facing, ng, scene.shape_size[s], scene.tile)
-            paths.idle[i] += 1
-        elif max_order > 0 and paths.order[i] >= max_order:
-            truncate(paths, i, tally)
-            keep = False
-        else:
-            keep, o, d = interact(paths, i, h, d, s, scene, tally)
-    else:
-        end = rays.end[i]
-        if end == TOP:
-            exit_top(paths, i, d, sensor, tally)
-            keep = False
-        elif end == BOTTOM:
-            add_lost(tally, TRANSMITTED, paths.weight[i], paths.order[i])
-            keep = False
-        else:
-            paths.idle[i] += 1
-            o = wrap_side(o, d, t, end, scene.tile)
-    if keep and paths.idle[i] >= MAX_IDLE_SEGMENTS:
-        truncate(paths, i, tally)
-        keep = False
-    return keep, o, d
-
-
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def interact(paths, i, h, d, s, scene, tally):
-    """Path i meets shape s at h going along d: scatter it by the shape's material.
-
-    Returns (survives, origin of the next segment off the surface, new direction); the path's
-    weight and order are updated, absorbed and truncated weight tallied.
-    """
-    p, n = surface_point(scene.shape_code[s], scene.shape_params[s], h)
-    m = scene.shape_material[s]
-    d, factor, cut = scatter(scene.material_code[m], scene.material_params[m], paths.rng, i, d, n)
-    w = paths.weight[i]
-    if paths.order[i] == 0:
-        paths.from_base[i] = m == scene.base_material
-    add_interaction(tally, w, paths.order[i], factor, cut)
-    paths.weight[i] = w * factor
-    paths.order[i] += 1
-    if not survives_interaction(paths, i, tally):
-        return False, p, d
-    paths.idle[i] = 0
-    offset = clearance(p, scene.shape_size[s])
-    return True, wrap_point(p, n, offset, scene.tile), d
-
-
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def pass_through(h, d, facing, ng, size, tile):
-    """Origin past a back face hit at h: far enough along d to clear the face in float32."""
-    cosine = facing / math.sqrt(ng[0] ** 2 + ng[1] ** 2 + ng[2] ** 2)
-    nudge = clearance(h, size) / max(cosine, MIN_PASS_COSINE)
-    return wrap_point(h, d, nudge, tile)
-
-
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def clearance(p, size):
-    """Distance a ray keeps from the surface it leaves at p (see module doc)."""
-    return max(OFFSET_SIZE * size, OFFSET_SPACINGS * FLOAT32_EPS * max(abs(p[0]), abs(p[1]), abs(p[2])))
-
-
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def wrap_point(p, v, distance, tile):
-    """p + distance v, folded into the tile in x and y."""
-    return wrap(p[0] + distance * v[0], tile), wrap(p[1] + distance * v[1], tile), p[2] + distance * v[2]
-
-
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def wrap_side(o, d, t, end, tile):
-    """The ray from o along d reaches the tile side ``end`` at t: continue from the opposite side."""
-    x, y, z = o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]
-    if end == SIDE_X:
-        return (0.0 if d[0] > 0.0 else tile), wrap(y, tile), z
-    return wrap(x, tile), (0.0 if d[1] > 0.0 else tile), z
-
-
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def wrap(v, tile):
-    """v folded into [0, tile); v is at most one tile outside, so no division is needed."""
-    if v < 0.0:
-        return v + tile
-    if v >= tile:
-        return v - tile
-    return v
-
-
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def prepare_segment(rays, i, o, d, scene):
-    """Store ray i in float32, with its distance to the boundary of the tile's slab and which side it meets."""
-    rays.origin[i, 0], rays.origin[i, 1], rays.origin[i, 2] = o
-    rays.direction[i, 0], rays.direction[i, 1], rays.direction[i, 2] = d
-    ox, oy, oz = np.float64(rays.origin[i, 0]), np.float64(rays.origin[i, 1]), np.float64(rays.origin[i, 2])
-    dx, dy, dz = np.float64(rays.direction[i, 0]), np.float64(rays.direction[i, 1]), np.float64(rays.direction[i, 2])
-    # the vertical boundary first; a side is met first only if dist_side < |d_side| t, which is
-    # tested without dividing (most segments end at a surface or at the top, not at a side)
-    if dz > 0.0:
-        t, end = (scene.z_top - oz) / dz, TOP
-    elif dz < 0.0:
-        t, end = (scene.z_bottom - oz) / dz, BOTTOM
-    else:
-        t, end = math.inf, TOP
-    side_x = scene.tile - ox if dx > 0.0 else ox
-    if side_x < abs(dx) * t:
-        t, end = side_x / abs(dx), SIDE_X
-    side_y = scene.tile - oy if dy > 0.0 else oy
-    if side_y < abs(dy) * t:
-        t, end = side_y / abs(dy), SIDE_Y
-    rays.end[i] = end
-    rays.tfar[i] = max(t, 0.0)
+    """The module of backend ``name``."""
+    if name not in BACKENDS:
+        raise ValueError(f"unknown backend {name!r}; known: {', '.join(BACKENDS)}")
+    return BACKENDS[name]

@@ -1,6 +1,6 @@
 """The V-cavity tracer: each path in a groove of its own, traced in the groove's cross-section.
 
-A path draws its groove's facet slope from D(m)(m.n) (:func:`~microsim.models.distributions.sample_slope`;
+A path draws its groove's facet slope from D(m)(m.n) (:func:`~microsim.physics.distributions.sample_slope`;
 why this is the V-cavity surface exactly: :mod:`geometry.vcavities`), and enters the groove's
 aperture at a uniform point. In the cross-section, with u the horizontal unit vector of m and
 h = tan(theta_m), the groove is x in [-1, 1] above the two facet lines z = -h (x + 1) (the left
@@ -17,34 +17,52 @@ Two ways to find that crossing (``intersector``), one path body:
 - :func:`meet_analytic`: the three crossings in float64; a ray leaving a facet moves inwards
   across it, so it cannot meet it again, and nothing is offset.
 - :func:`meet_embree`: Embree's closest hit on the canonical groove (half-width 1, depth 1,
-  :data:`geometry.vcavities.CANONICAL_FACES`), the ray mapped by (x, z) -> (x, z / h) and its
+  :data:`CANONICAL_FACES`), the ray mapped by (x, z) -> (x, z / h) and its
   axial motion dropped, so t is the world t; its origin is lifted 8 float32 spacings off the facet
   it leaves (Embree works in float32). Embree says which facet is met (or none); the distance to
   it is then that of the float64 ray from the unlifted origin, so the lift does not move hit
-  points. Rays can be logged, as on the fused backend, for the benchmark's replay through Embree
+  points. Rays can be logged, as on the direct backend, for the benchmark's replay through Embree
   alone.
 
-Paths run to completion one at a time, in chunks on threads exactly as on the fused surface
-backend (:func:`microsim.integrators.fused.trace_in_waves`): a table is bit-identical for any
+Paths run to completion one at a time, in chunks on threads exactly as on the direct surface
+backend (:func:`microsim.integrators.scheduler.trace_in_waves`): a table is bit-identical for any
 number of threads.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
 
-from geometry.vcavities import CANONICAL_FACES, CANONICAL_VERTICES, LEFT_FACET_TRIANGLES
-
 from .. import embree
 from ..materials import scatter
-from ..models.distributions import sample_slope
-from ..rng import uniform
+from ..physics.distributions import sample_slope
+from ..physics.rng import uniform
 from .events import add_interaction, begin_path, exit_top, survives_interaction, truncate
-from .fused import CHUNK_PATHS, chunk_tally, compile_tally_sums, trace_in_waves, wave_rows, workspace
 from .records import SEGMENTS, SINGLE_ALBEDO, Beam
+from .scheduler import CHUNK_PATHS, chunk_tally, compile_tally_sums, trace_in_waves, wave_rows, workspace
+
+#: the canonical groove the Embree intersector traces: half-width 1 in x, depth 1, y in [-1, 1]
+#: (a ray's axial motion is dropped, so it never leaves y = 0); left facet (normal +x side) first
+CANONICAL_VERTICES = np.array([[-1, -1, 0], [0, -1, -1], [0, 1, -1], [-1, 1, 0], [1, -1, 0], [1, 1, 0]], np.float32)
+CANONICAL_FACES = np.array([[0, 1, 2], [0, 2, 3], [1, 4, 5], [1, 5, 2]], np.int32)
+#: triangles of CANONICAL_FACES that make the left facet (the facet m); the others make m'
+LEFT_FACET_TRIANGLES = 2
+
+
+class Grooves(NamedTuple):
+    """What the V-cavity kernels read: the distribution (code of ``distributions.DISTRIBUTIONS``),
+    its two roughnesses, and the facets' material (kind code, parameter row)."""
+
+    distribution: int
+    roughness_x: float
+    roughness_y: float
+    material_code: int
+    material_params: np.ndarray
+
 
 #: facets of a groove, as :func:`meet_analytic` and :func:`meet_embree` name them; NONE: no facet
 LEFT, RIGHT, NONE = 0, 1, -1
@@ -95,8 +113,6 @@ class VCavityTracer:
         """Compile (or load) both kernels before workers fork, for runs of ``albedos`` albedos,
         tracing nothing (the Embree one only where the library loads: its machine code links to
         rtcIntersect1 by name)."""
-        from geometry.vcavities import Grooves
-
         beam = Beam(np.array([0.0, 0.0, 1.0]), np.uint64(0), 0, 0, np.ones(albedos))
         grooves = Grooves(0, 0.5, 0.5, 0, np.zeros(2))
         work = workspace(1, sensor.tally_width, albedos=albedos)

@@ -31,7 +31,7 @@ Against order-1 tables of the tracer (16 realizations, so 1.15 is expected) chi^
 1.01-1.41 for phi = 0.005 and 0.02 at theta_i = 0-85 deg (tests/test_single_scattering.py and
 benchmarks/dilute_limit.py, which also covers phi = 0.01-0.08). The expansion needs k r / l
 small: at grazing retro with k r / l > 1 the neglected attenuation of hit points above the
-top matters. r / l = -3/4 ln(1 - phi) comes from :mod:`microsim.boolean_model`, the relations the
+top matters. r / l = -3/4 ln(1 - phi) comes from :mod:`microsim.physics.boolean_model`, the relations the
 scene generator uses too.
 """
 
@@ -42,7 +42,7 @@ import math
 import numba
 import numpy as np
 
-from ..boolean_model import radius_over_free_path
+from ..physics.boolean_model import radius_over_free_path
 from .base import BRDFModel, Param, register
 from .radiative_transfer import single_scattering
 

@@ -77,14 +77,15 @@ def phase_coefficients(c: float) -> tuple[float, float, float]:
     return c, -4.0 * c / 3.0, 5.0 * c / 16.0
 
 
-#: the "mode" of isotropic scattering, Psi = c / 2 (Chandrasekhar 1960, Radiative Transfer, Ch. V):
-#: its H-function is computed by the same Fock formula, with K(0) = 1 - c
-ISOTROPIC = "isotropic"
+#: the "mode" of isotropic scattering (physics.phase's "isotropic"), Psi = c / 2 (Chandrasekhar 1960,
+#: Radiative Transfer, Ch. V): its H-function is computed by the same Fock formula, with K(0) = 1 - c;
+#: modes 0, 1, 2 are those of the three-term phase function
+ISOTROPIC_MODE = "isotropic"
 
 
 def psi_coefficients(mode: int | str, c: float) -> np.ndarray:
-    """(p0, p2, p4) with Psi^(mode)(mu) = p0 + p2 mu^2 + p4 mu^4, Eqs. 13-15 (ISOTROPIC: c / 2)."""
-    if mode == ISOTROPIC:
+    """(p0, p2, p4) with Psi^(mode)(mu) = p0 + p2 mu^2 + p4 mu^4, Eqs. 13-15 (ISOTROPIC_MODE: c / 2)."""
+    if mode == ISOTROPIC_MODE:
         return np.array([0.5 * c, 0.0, 0.0])
     if mode == 0:
         return np.array([207.0 * c, c * (20.0 * c * c + 281.0 * c - 346.0), -15.0 * c * (c - 1.0) * (4.0 * c + 9.0)]) / 384.0
@@ -92,7 +93,7 @@ def psi_coefficients(mode: int | str, c: float) -> np.ndarray:
         return np.array([-64.0 * c, c * (20.0 * c + 109.0), -5.0 * c * (4.0 * c + 9.0)]) / 192.0
     if mode == 2:
         return np.array([1.0, -2.0, 1.0]) * (15.0 * c / 256.0)
-    raise ValueError(f"mode = {mode!r} is outside {{0, 1, 2, {ISOTROPIC!r}}}")
+    raise ValueError(f"mode = {mode!r} is outside {{0, 1, 2, {ISOTROPIC_MODE!r}}}")
 
 
 def _check_c(c: float) -> float:
@@ -105,7 +106,7 @@ def _check_c(c: float) -> float:
 def k_at_zero(mode: int, c: float) -> float:
     """K^(mode)(0) = 1 - 2 int_0^1 Psi; mode 0 in the factored form of Eq. 32 (exactly 0 at c = 1)."""
     c = _check_c(c)
-    if mode == ISOTROPIC:
+    if mode == ISOTROPIC_MODE:
         return 1.0 - c
     if mode == 0:
         return (16.0 - c) * (1.0 - c) * (4.0 * c + 9.0) / 144.0

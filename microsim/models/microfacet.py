@@ -1,8 +1,8 @@
 """The specular microfacet BRDF f = D(h) G(i, o, h) F(i.h) / (4 mu_i mu_o).
 
 interfaced_lambertian_microfacets.txt Eq. 3 (Cook-Torrance / Walter et al. 2007), with the
-NDFs and GAFs of :mod:`microsim.models.distributions` and the Fresnel reflectance of
-:func:`microsim.fresnel.fresnel`: a dielectric when ``k`` = 0 (exact unpolarised form, Eq. 7, total
+NDFs and GAFs of :mod:`microsim.physics.distributions` and the Fresnel reflectance of
+:func:`microsim.physics.fresnel.fresnel`: a dielectric when ``k`` = 0 (exact unpolarised form, Eq. 7, total
 internal reflection for ``eta`` < 1), a conductor with complex index ``eta`` + i ``k``
 otherwise. Eq. 3 prints the denominator 4 |i.h| |o.h|; inserting the facet BRDF of Eq. 5,
 F delta(h, m) / (4 |i.h|^2), into Eq. 2 gives F D G |i.h| |o.h| / (4 |i.h|^2 |i.n| |o.n|)
@@ -14,8 +14,8 @@ Default ``eta`` = 1.5 (a typical glass / plastic dielectric, as in the configs' 
 
 import numpy as np
 
-from ..fresnel import fresnel_array
-from . import distributions as nd
+from ..physics.fresnel import fresnel_array
+from ..physics import distributions as nd
 from .base import BRDFModel, Param, register
 
 

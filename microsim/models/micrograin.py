@@ -80,8 +80,8 @@ import math
 import numba
 import numpy as np
 
-from ..boolean_model import grain_extinction, unit_space_direction, unit_space_height
-from ..fresnel import fresnel, fresnel_conductor, fresnel_dielectric
+from ..physics.boolean_model import grain_extinction, unit_space_direction, unit_space_height
+from ..physics.fresnel import fresnel, fresnel_conductor, fresnel_dielectric
 from ..materials import CONDUCTOR, INTERFACED_LAMBERT, LAMBERT, MIRROR
 from .base import BRDFModel, Param, register
 from .micrograin_geometry import end_graded_gauss_rule, ndf_value, shadowed_area

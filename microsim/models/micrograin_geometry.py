@@ -4,7 +4,7 @@ Paper: ``papers/micrograin_bsdf_anisotropic.txt``. Grains are half-ellipsoids of
 semi-axis 1 and lateral semi-axes 1/beta_x, 1/beta_y whose centres are a Poisson process of
 density rho on the base plane z = 0 (CONVENTIONS 5.3), so that the covered fraction is
 ``tau0 = 1 - exp(-rho pi / (beta_x beta_y))``. That density, lambda and the unit-space maps
-below are the relations of the Boolean model in :mod:`microsim.boolean_model`, which the
+below are the relations of the Boolean model in :mod:`microsim.physics.boolean_model`, which the
 micrograin scene generator (a later issue) is to share.
 
 Parametrisation. The paper takes spheres of radius r_s stretched laterally by 1/beta_x, 1/beta_y
@@ -38,7 +38,7 @@ import math
 import numba
 import numpy as np
 
-from ..boolean_model import grain_extinction, unit_space_direction_array
+from ..physics.boolean_model import grain_extinction, unit_space_direction_array
 
 #: Gauss-Legendre order of the height integral of the Smith Lambda (micrograin_smith).
 LAMBDA_NODES = 32

@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..fresnel import fresnel_conductor_array, fresnel_dielectric_array
+from ..physics.fresnel import fresnel_conductor_array, fresnel_dielectric_array
 from .base import Param, register
 from .micrograin import MicrograinParams
 from .micrograin_geometry import ndf, pore_visibility, smith_lambda

@@ -15,7 +15,7 @@ Radiative Transfer, Ch. IV-V, the diffuse reflection of a semi-infinite isotropi
     f(wi, wo) = c H(mu_i) H(mu_o) / (4 pi (mu_i + mu_o)),
 
 H the solution of H(mu) = 1 + mu H(mu) int_0^1 (c / 2) H(mu') / (mu + mu') dmu'
-(:class:`~microsim.models.hfunctions.HFunction` with ``ISOTROPIC``); its directional albedo is
+(:class:`~microsim.models.hfunctions.HFunction` with ``ISOTROPIC_MODE``); its directional albedo is
 1 - H(mu_i) sqrt(1 - c), the model ``rte_isotropic``. The medium tables of
 ``geometry/halfspace_medium.py`` are checked against it.
 """
@@ -27,8 +27,8 @@ import math
 import numpy as np
 
 from .base import BRDFModel, Param, register
-from .hfunctions import ISOTROPIC, HFunction
-from .phase import phase_lambert_sphere
+from .hfunctions import ISOTROPIC_MODE, HFunction
+from ..physics.phase import phase_lambert_sphere
 
 
 def single_scattering(wi, wo, albedo, phase=phase_lambert_sphere) -> np.ndarray:
@@ -47,7 +47,7 @@ class RteIsotropic(BRDFModel):
     reference = "Chandrasekhar 1960 (Radiative Transfer, Ch. IV-V): f = c H(mu_i) H(mu_o) / (4 pi (mu_i + mu_o)), exact"
 
     def setup(self):
-        self.h = HFunction(ISOTROPIC, self.albedo)
+        self.h = HFunction(ISOTROPIC_MODE, self.albedo)
 
     def _eval(self, wi, wo):
         mu_i, mu_o = wi[:, 2], wo[:, 2]

@@ -1,15 +1,23 @@
-"""The Lambert-sphere phase function, its Legendre coefficients and two samplers.
+"""Phase functions: the registry of those a medium can scatter with, and the Lambert sphere's.
 
-Paper: lambert_sphere_brdf.txt, Eqs. 1-6. ``mu`` is the cosine of the scattering angle between
-the propagation directions before and after scattering, so mu = -1 is backscatter, where p peaks
-(mean cosine g = -4/9). The samplers are numba ufuncs: they take arrays from Python and scalars
-inside ``@numba.njit`` kernels (the volumetric reference tracer calls them there).
+``mu`` is the cosine of the scattering angle between the propagation directions before and after
+scattering, so mu = -1 is backscatter. ``PHASES`` names each phase function once: its code (what
+the medium's kernel branches on, :func:`sample_cosine`), p(mu) in 1/sr, and how it is sampled
+(recorded in a table's ``scene/phase_sampling``). The config's ``[scene] phase``, the medium
+tracer and the models read it from here.
+
+The Lambert sphere's (lambert_sphere_brdf.txt, Eqs. 1-6) peaks at backscatter (mean cosine
+g = -4/9). Its samplers are numba ufuncs: they take arrays from Python and scalars inside
+``@numba.njit`` kernels (the volumetric reference tracer calls them there).
 """
 
 import math
+from typing import Callable, NamedTuple
 
 import numba
 import numpy as np
+
+from .rng import uniform
 
 
 @numba.vectorize(["float64(float64)"], cache=True)
@@ -51,3 +59,34 @@ def sample_phase_exact(xi1, xi2, xi3):
 def sample_phase_approx(xi):
     """Scattering cosine from one uniform in [0, 1) by the approximate inverse CDF, Eq. 6 (|error| < 5e-4)."""
     return 1.0 - 2.0 * (1.0 - xi ** (0.0401885 * xi + 1.01938)) ** 0.397225
+
+
+def phase_isotropic(mu):
+    """p(mu) = 1 / (4 pi)."""
+    return np.full(np.shape(mu), 0.25 / math.pi)
+
+
+class Phase(NamedTuple):
+    """A phase function: its name, its kernel code, p(mu) in 1/sr, and how kernels sample mu."""
+
+    name: str
+    code: int
+    p: Callable
+    sampling: str
+
+
+#: kernel codes (numba reads module globals)
+ISOTROPIC, LAMBERT_SPHERE = 0, 1
+PHASES = {phase.name: phase for phase in (
+    Phase("isotropic", ISOTROPIC, phase_isotropic, "exact: mu = 1 - 2 xi"),
+    Phase("lambert_sphere", LAMBERT_SPHERE, phase_lambert_sphere, "exact: lambert_sphere_brdf.txt Eq. 5 (three uniforms)"),
+)}
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def sample_cosine(code, states, i):
+    """mu drawn exactly from the phase function of kernel code ``code`` (:data:`PHASES`), from
+    the random stream of path i."""
+    if code == LAMBERT_SPHERE:
+        return sample_phase_exact(uniform(states, i), uniform(states, i), uniform(states, i))
+    return 1.0 - 2.0 * uniform(states, i)

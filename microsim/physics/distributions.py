@@ -50,7 +50,7 @@ import numba
 import numpy as np
 from scipy.special import erfc
 
-from ..rng import uniform
+from .rng import uniform
 
 DISTRIBUTIONS = ("beckmann", "ggx", "gaussian")
 GAFS = ("smith", "smith_height_correlated", "torrance_sparrow")

@@ -1,7 +1,7 @@
 """Sampling helpers shared by every integrator and material (numba, on 3-tuples).
 
 Directions and normals are tuples ``(x, y, z)`` of float64; random numbers come from the
-counter-keyed stream ``states[i]`` of path ``i`` (:mod:`microsim.rng`).
+counter-keyed stream ``states[i]`` of path ``i`` (:mod:`microsim.physics.rng`).
 """
 
 from __future__ import annotations

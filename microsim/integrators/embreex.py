@@ -2,9 +2,9 @@
 
 A batch of paths is traced as a loop of segments (wavefront). Each pass hands every live ray to
 Embree through embreex in one call, then :func:`advance` takes every ray through its event
-(:func:`~microsim.integrators.surface.follow`), compacts the live paths in place and prepares
+(:func:`~microsim.integrators.surface_transport.follow`), compacts the live paths in place and prepares
 their next segments. Every pass goes through Python and embreex, which loops over single rays
-and allocates its outputs; the fused backend does without both. This one needs nothing but the
+and allocates its outputs; the direct backend does without both. This one needs nothing but the
 embreex package: it is the fallback where the direct binding cannot load, and it traces
 triangles only.
 
@@ -20,7 +20,7 @@ import numpy as np
 
 from .events import move_path
 from .records import SEGMENTS, allocate_paths, allocate_rays, empty_tally
-from .surface import follow, prepare_segment, start_path
+from .surface_transport import follow, prepare_segment, start_path
 
 #: paths traced at once; their tallies are added batch after batch
 BATCH_PATHS = 1 << 20
@@ -29,15 +29,15 @@ BATCH_PATHS = 1 << 20
 def backend(scene, threads: int):
     if threads != 1:
         raise ValueError("the embreex backend traces on one thread")
-    return WavefrontBackend(scene)
+    return EmbreexBackend(scene)
 
 
 def compile_kernels(beam, scene, sensor) -> None:
     """Compile (or load) spawn_paths and advance, with no embreex scene (nothing to hit)."""
-    WavefrontBackend(scene, embree=_NoHits()).trace(beam, scene.arrays(), sensor)
+    EmbreexBackend(scene, embree=_NoHits()).trace(beam, scene.arrays(), sensor)
 
 
-class WavefrontBackend:
+class EmbreexBackend:
     """The scene's triangles in an embreex scene, traced a segment of every live path at a time."""
 
     name = "embreex"

@@ -1,0 +1,131 @@
+"""The direct backend of the surface tracer: numba calls Embree itself, paths run to completion.
+
+Each chunk of paths (:mod:`.scheduler`) is traced to completion into a tally of its own, segment
+after segment (``rtcIntersect1`` on an ``RTCRayHit`` record of its own, then the shared event
+kernels of :mod:`.surface_transport`), with no Python between segments: two paths at a time
+(``SLOTS``), both queries then both events, so that the processor overlaps the two paths' work;
+a slot whose path ends takes the chunk's next path (:func:`trace_chunk`). All threads share one
+committed Embree scene. Memory is one scene per process, a few hundred bytes per path row, and
+the tallies of one wave. Why two slots, chunks of 8192 paths, and the designs measured against
+this kernel: docs/performance.md.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from .. import embree
+from .records import SEGMENTS
+from .scheduler import CHUNK_PATHS, SLOTS, chunk_tally, compile_tally_sums, trace_in_waves, wave_rows, workspace
+from .surface_transport import follow, prepare_segment, start_path
+
+def backend(scene, threads: int):
+    return DirectBackend(scene, threads)
+
+
+def compile_kernels(beam, scene, sensor) -> None:
+    """Compile (or load) :func:`trace_chunks` for these types, tracing nothing: no Embree call,
+    no device. The library is loaded first: the kernel's machine code links to rtcIntersect1 by
+    name (without it, loading the code segfaults)."""
+    embree.available()
+    work = workspace(1, sensor.tally_width, albedos=len(beam.albedo_scale))
+    trace_chunks(0, 0, 0, beam, scene.arrays(), embree.SceneHandle(0, np.zeros(1, np.int64), np.ones(2)), sensor, work)
+    compile_tally_sums(beam, work)
+
+
+class DirectBackend:
+    """The scene in a committed Embree scene of its own, traced by chunks on ``threads`` threads.
+
+    ``log_rays`` > 0 (one thread only) keeps the first ``log_rays`` queries, in the order they
+    are made, in ``ray_log`` (rows of origin, direction, tfar): the throughput benchmark replays
+    them through Embree alone.
+    """
+
+    name = "direct"
+
+    def __init__(self, scene, threads: int = 1, log_rays: int = 0):
+        if log_rays and threads != 1:
+            raise ValueError("the ray log keeps the order of one thread: give threads = 1")
+        self.embree = embree.Scene(scene.vertices, scene.faces, scene.spheres, sphere_scale=scene.sphere_scale)
+        self.threads, self.log_rays = threads, log_rays
+        self.ray_log = np.zeros((0, 7), np.float32)
+
+    def trace(self, beam, scene, sensor):
+        work = workspace(wave_rows(beam.n_paths, self.threads), sensor.tally_width, self.log_rays, len(beam.albedo_scale))
+        handle = self.embree.arrays()
+        total = trace_in_waves(beam, sensor.tally_width, self.threads, work,
+                               lambda *share: trace_chunks(*share, beam, scene, handle, sensor, work))
+        self.ray_log = work.log[:min(work.logged[0], len(work.log))]
+        return total
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def trace_chunks(first, start, stop, beam, scene, handle, sensor, work):
+    """Trace chunks first+start .. first+stop-1 of the beam to completion, chunk first+j into tally
+    row j, its paths in path row j (see :func:`trace_chunk`)."""
+    for j in range(start, stop):
+        chunk = first + j
+        trace_chunk(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths), SLOTS * j, beam, scene, handle,
+                    sensor, work, chunk_tally(work, j, beam))
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def trace_chunk(begin, end, row, beam, scene, handle, sensor, work, tally):
+    """Paths begin .. end-1, two at a time in rows ``row`` and ``row + 1``: both queries, then both
+    events, so that the processor overlaps the two paths' event arithmetic (independent chains of
+    divisions, square roots and random numbers); a slot whose path ends takes the next path.
+    One body serves both slots and the last one alone: numba inlines the event kernels twice
+    (with a third copy for the last slot, the kernel took 56 s to compile)."""
+    a, b = row, row + 1
+    busy_a, busy_b, number = False, False, begin
+    if number < end:
+        start_path(work.paths, work.rays, a, number, beam, scene)
+        busy_a, number = True, number + 1
+    if number < end:
+        start_path(work.paths, work.rays, b, number, beam, scene)
+        busy_b, number = True, number + 1
+    while busy_a or busy_b:
+        if busy_a:
+            query(handle, work, a)
+        if busy_b:
+            query(handle, work, b)
+        tally.counts[SEGMENTS] += busy_a + busy_b
+        if busy_a:
+            busy_a, number = event(work, a, number, end, handle, beam, scene, sensor, tally)
+        if busy_b:
+            busy_b, number = event(work, b, number, end, handle, beam, scene, sensor, tally)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def event(work, row, number, end, handle, beam, scene, sensor, tally):
+    """The path in ``row`` met the hit Embree left in its record: follow it, and prepare its next
+    segment, or start path ``number`` in its row if it ended and paths are left. Returns (row
+    busy, next path number)."""
+    prim, t, normal = embree.hit_of(handle, work.records, row)
+    alive, o, d = follow(work.paths, work.rays, row, (prim, np.float64(t), normal), scene, sensor, beam.max_order,
+                         tally)
+    if alive:
+        prepare_segment(work.rays, row, o, d, scene)
+        return True, number
+    if number < end:
+        start_path(work.paths, work.rays, row, number, beam, scene)
+        return True, number + 1
+    return False, number
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def query(handle, work, j):
+    """Embree's closest hit on the segment in row j, left in its record (and the query logged if
+    a ray log is kept)."""
+    rays = work.rays
+    embree.clear_hit(work.records[j])  # the segment is in the query already (prepare_segment)
+    if len(work.log):
+        k = work.logged[0]
+        work.logged[0] = k + 1
+        if k < len(work.log):
+            for axis in range(3):
+                work.log[k, axis] = rays.origin[j, axis]
+                work.log[k, 3 + axis] = rays.direction[j, axis]
+            work.log[k, 6] = rays.tfar[j]
+    embree.trace(handle.handle, work.records, j)
