@@ -53,8 +53,8 @@ def analytic_replay(origins, directions):
     """meet_analytic on logged canonical rays (depth 1); the sum of t keeps the work observable."""
     total = 0.0
     for k in range(len(origins)):
-        facet, t = meet_analytic(0, 0, 0, np.float64(origins[k, 0]), np.float64(origins[k, 2]),
-                                 np.float64(directions[k, 0]), np.float64(directions[k, 2]), 1.0, -1)
+        facet, t = meet_analytic(0, 0, 0, (np.float64(origins[k, 0]), np.float64(origins[k, 2])),
+                                 (np.float64(directions[k, 0]), np.float64(directions[k, 2])), 1.0, -1)
         if facet >= 0:
             total += t
     return total

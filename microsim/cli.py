@@ -158,18 +158,14 @@ def cli():
                    "cluster (a LocalCluster of --workers processes without --scheduler)")
 @click.option("--scheduler", metavar="ADDRESS", help="address of a Dask scheduler, e.g. tcp://10.0.0.5:8786 "
                                                       "(with --executor dask)")
-def run(config_path, out, workers, threads, backend, paths, seed, force, resume, executor, scheduler):
+def run(config_path, **flags):
     """Trace CONFIG.toml and write its HDF5 table."""
     from . import config as config_module
     from . import runner, sweep, unit_store
 
-    overrides = {}
-    if paths is not None:
-        overrides["run.paths"] = paths
-    if seed is not None:
-        overrides["run.seed"] = seed
-    if backend is not None:
-        overrides["run.backend"] = backend
+    out, workers, threads, executor, scheduler = (flags[k] for k in ("out", "workers", "threads", "executor",
+                                                                      "scheduler"))
+    overrides = {f"run.{key}": flags[key] for key in ("paths", "seed", "backend") if flags[key] is not None}
     try:
         data = config_module.read(config_path, overrides)
         points = sweep.points(data)
@@ -180,7 +176,7 @@ def run(config_path, out, workers, threads, backend, paths, seed, force, resume,
         raise BadInput("--scheduler: a Dask scheduler's address is taken with --executor dask only")
     if executor == "dask":
         _check_dask(scheduler)
-    options = Options(workers, threads, force, resume, executor, scheduler)
+    options = Options(workers, threads, flags["force"], flags["resume"], executor, scheduler)
     if points is not None:
         _run_sweep(points, out if out is not None else Path(config_path.stem), options, config_path)
         return

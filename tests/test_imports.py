@@ -85,3 +85,28 @@ def test_no_import_circle_in_microsim_and_geometry():
 def test_the_graph_sees_a_circle():
     """The check itself: a graph with a circle has one."""
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+#: the most arguments a function of microsim/ or geometry/ takes (issue 25): more is a record to make
+MAX_ARGUMENTS = 8
+
+
+def long_signatures() -> list[str]:
+    """Functions of the packages that take more than MAX_ARGUMENTS arguments (self and cls not
+    counted; *args and **kwargs count one each)."""
+    found = []
+    for package in PACKAGES:
+        for path in sorted((ROOT / package).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+                    a = node.args
+                    names = [x.arg for x in (*a.posonlyargs, *a.args)]
+                    count = len(names) + len(a.kwonlyargs) + (a.vararg is not None) + (a.kwarg is not None)
+                    count -= bool(names) and names[0] in ("self", "cls")
+                    if count > MAX_ARGUMENTS:
+                        found.append(f"{path.relative_to(ROOT)}:{node.lineno} {getattr(node, 'name', 'lambda')} ({count})")
+    return found
+
+
+def test_no_function_takes_more_than_8_arguments():
+    assert long_signatures() == []

@@ -12,6 +12,8 @@ this kernel: docs/performance.md.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
@@ -19,6 +21,13 @@ from .. import embree
 from .records import SEGMENTS
 from .scheduler import CHUNK_PATHS, SLOTS, chunk_tally, compile_tally_sums, trace_in_waves, wave_rows, workspace
 from .surface_transport import follow, prepare_segment, start_path
+
+class DirectWorld(NamedTuple):
+    """What the direct backend's kernels trace: the scene's arrays, and its committed Embree scene."""
+
+    scene: object
+    handle: object
+
 
 def backend(scene, threads: int):
     return DirectBackend(scene, threads)
@@ -30,7 +39,8 @@ def compile_kernels(beam, scene, sensor) -> None:
     name (without it, loading the code segfaults)."""
     embree.available()
     work = workspace(1, sensor.tally_width, albedos=len(beam.albedo_scale))
-    trace_chunks(0, 0, 0, beam, scene.arrays(), embree.SceneHandle(0, np.zeros(1, np.int64), np.ones(2)), sensor, work)
+    world = DirectWorld(scene.arrays(), embree.SceneHandle(0, np.zeros(1, np.int64), np.ones(2)))
+    trace_chunks(0, 0, 0, beam, world, sensor, work)
     compile_tally_sums(beam, work)
 
 
@@ -53,30 +63,31 @@ class DirectBackend:
 
     def trace(self, beam, scene, sensor):
         work = workspace(wave_rows(beam.n_paths, self.threads), sensor.tally_width, self.log_rays, len(beam.albedo_scale))
-        handle = self.embree.arrays()
+        world = DirectWorld(scene, self.embree.arrays())
         total = trace_in_waves(beam, sensor.tally_width, self.threads, work,
-                               lambda *share: trace_chunks(*share, beam, scene, handle, sensor, work))
+                               lambda *share: trace_chunks(*share, beam, world, sensor, work))
         self.ray_log = work.log[:min(work.logged[0], len(work.log))]
         return total
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def trace_chunks(first, start, stop, beam, scene, handle, sensor, work):
+def trace_chunks(first, start, stop, beam, world, sensor, work):
     """Trace chunks first+start .. first+stop-1 of the beam to completion, chunk first+j into tally
     row j, its paths in path row j (see :func:`trace_chunk`)."""
     for j in range(start, stop):
         chunk = first + j
-        trace_chunk(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths), SLOTS * j, beam, scene, handle,
+        trace_chunk(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths), SLOTS * j, beam, world,
                     sensor, work, chunk_tally(work, j, beam))
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def trace_chunk(begin, end, row, beam, scene, handle, sensor, work, tally):
+def trace_chunk(begin, end, row, beam, world, sensor, work, tally):
     """Paths begin .. end-1, two at a time in rows ``row`` and ``row + 1``: both queries, then both
     events, so that the processor overlaps the two paths' event arithmetic (independent chains of
     divisions, square roots and random numbers); a slot whose path ends takes the next path.
     One body serves both slots and the last one alone: numba inlines the event kernels twice
     (with a third copy for the last slot, the kernel took 56 s to compile)."""
+    scene, handle = world
     a, b = row, row + 1
     busy_a, busy_b, number = False, False, begin
     if number < end:
@@ -92,16 +103,17 @@ def trace_chunk(begin, end, row, beam, scene, handle, sensor, work, tally):
             query(handle, work, b)
         tally.counts[SEGMENTS] += busy_a + busy_b
         if busy_a:
-            busy_a, number = event(work, a, number, end, handle, beam, scene, sensor, tally)
+            busy_a, number = event(work, a, (number, end), beam, world, sensor, tally)
         if busy_b:
-            busy_b, number = event(work, b, number, end, handle, beam, scene, sensor, tally)
+            busy_b, number = event(work, b, (number, end), beam, world, sensor, tally)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def event(work, row, number, end, handle, beam, scene, sensor, tally):
+def event(work, row, waiting, beam, world, sensor, tally):
     """The path in ``row`` met the hit Embree left in its record: follow it, and prepare its next
-    segment, or start path ``number`` in its row if it ended and paths are left. Returns (row
-    busy, next path number)."""
+    segment, or start path ``number`` of ``waiting`` = (number, end) in its row if it ended and
+    paths are left. Returns (row busy, next path number)."""
+    (number, end), (scene, handle) = waiting, world
     prim, t, normal = embree.hit_of(handle, work.records, row)
     alive, o, d = follow(work.paths, work.rays, row, (prim, np.float64(t), normal), scene, sensor, beam.max_order,
                          tally)

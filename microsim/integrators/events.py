@@ -6,9 +6,16 @@ update it and the batch's :class:`~microsim.integrators.records.Tally` in place:
 - :func:`begin_path`: a path's starting state;
 - :func:`exit_top`: the path leaves the surface; its weight is binned on the sensor, by order
   (and order 1 scattered by the base plane apart);
-- :func:`survives_interaction`: after an interaction, the path ends if it has no weight left,
-  is truncated at ``MAX_INTERACTIONS`` (its weight reported, never dropped), and plays Russian
-  roulette below ``ROULETTE_WEIGHT`` (unbiased: survivors carry ROULETTE_WEIGHT);
+- :func:`cut_at_max_order`: before an interaction, a path that has had ``max_order`` of them
+  is truncated;
+- :func:`interacted`: the bookkeeping of an interaction, the same whatever scattered the path (a
+  surface's material, a medium's phase function): the weight the interaction did not keep is
+  tallied as absorbed or truncated, the weight multiplied, the order counted; then
+  :func:`survives_interaction`: the path ends if it has no weight left, is truncated at
+  ``MAX_INTERACTIONS`` (its weight reported, never dropped), and plays Russian roulette below
+  ``ROULETTE_WEIGHT`` (unbiased: survivors carry ROULETTE_WEIGHT);
+- :func:`idled`: a segment without an interaction (a tile side crossed, a face passed through);
+  a path idle for ``MAX_IDLE_SEGMENTS`` segments is truncated;
 - :func:`truncate`: the weight of a path cut short is reported as truncated;
 - :func:`move_path`: compaction of the live paths, every field of ``Paths`` at once.
 """
@@ -123,6 +130,38 @@ def _add_interaction(energy, scale, w, order, factor, cut):
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def truncate(paths, i, tally):
     add_lost(tally, TRUNCATED, paths.weight[i], paths.order[i])
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def cut_at_max_order(paths, i, max_order, tally):
+    """Whether path i, about to interact, has had its ``max_order`` interactions (0: no cap);
+    its weight is then truncated."""
+    if max_order > 0 and paths.order[i] >= max_order:
+        truncate(paths, i, tally)
+        return True
+    return False
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def interacted(paths, i, factor, cut, tally):
+    """Path i interacted, keeping ``factor`` of its weight (a fraction ``cut`` of it cut short):
+    the bookkeeping of every integrator's interactions (module doc). Returns whether it goes on."""
+    w = paths.weight[i]
+    add_interaction(tally, w, paths.order[i], factor, cut)
+    paths.weight[i] = w * factor
+    paths.order[i] += 1
+    return survives_interaction(paths, i, tally)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def idled(paths, i, tally):
+    """Path i went a segment without an interaction. Returns whether it has gone
+    MAX_IDLE_SEGMENTS of them, and was truncated."""
+    paths.idle[i] += 1
+    if paths.idle[i] >= MAX_IDLE_SEGMENTS:
+        truncate(paths, i, tally)
+        return True
+    return False
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

@@ -22,7 +22,7 @@ import numpy as np
 from ..physics.phase import sample_cosine
 from ..physics.rng import uniform
 from ..physics.sampling import from_local
-from .events import add_interaction, begin_path, exit_top, survives_interaction, truncate
+from .events import begin_path, cut_at_max_order, exit_top, interacted
 from .records import SEGMENTS, SINGLE_ALBEDO, Beam
 from .scheduler import CHUNK_PATHS, chunk_tally, compile_tally_sums, trace_in_waves, wave_rows, workspace
 
@@ -87,16 +87,11 @@ def trace_path(paths, row, number, beam, medium, sensor, tally):
         if d[2] > 0.0 and z + flight * d[2] >= 0.0:
             exit_top(paths, row, d, sensor, tally)
             return
-        if beam.max_order > 0 and paths.order[row] >= beam.max_order:
-            truncate(paths, row, tally)
+        if cut_at_max_order(paths, row, beam.max_order, tally):
             return
         z += flight * d[2]
         d = scatter_direction(medium.phase, paths.rng, row, d)
-        w = paths.weight[row]
-        add_interaction(tally, w, paths.order[row], medium.albedo, 0.0)
-        paths.weight[row] = w * medium.albedo
-        paths.order[row] += 1
-        if not survives_interaction(paths, row, tally):
+        if not interacted(paths, row, medium.albedo, 0.0, tally):
             return
 
 

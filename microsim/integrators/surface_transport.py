@@ -40,7 +40,7 @@ import numpy as np
 from ..materials import scatter
 from ..physics.rng import uniform
 from ..shapes import surface_point
-from .events import MAX_IDLE_SEGMENTS, add_interaction, begin_path, add_lost, exit_top, survives_interaction, truncate
+from .events import add_lost, begin_path, cut_at_max_order, exit_top, idled, interacted
 from .records import INSIDE_HITS, TRANSMITTED
 
 #: segment ends: the tile side (wrap), the top (leave), the bottom (transmitted)
@@ -75,7 +75,6 @@ def follow(paths, rays, i, hit, scene, sensor, max_order, tally):
     o = (np.float64(rays.origin[i, 0]), np.float64(rays.origin[i, 1]), np.float64(rays.origin[i, 2]))
     d = (np.float64(rays.direction[i, 0]), np.float64(rays.direction[i, 1]), np.float64(rays.direction[i, 2]))
     p, t, ng = hit
-    keep = True
     if p >= 0:
         h = (o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2])
         s = scene.prim_shape[p]
@@ -83,27 +82,19 @@ def follow(paths, rays, i, hit, scene, sensor, max_order, tally):
         if facing >= 0.0:
             tally.counts[INSIDE_HITS] += 1
             o = pass_through(h, d, facing, ng, scene.shape_size[s], scene.tile)
-            paths.idle[i] += 1
-        elif max_order > 0 and paths.order[i] >= max_order:
-            truncate(paths, i, tally)
-            keep = False
-        else:
-            keep, o, d = interact(paths, i, h, d, s, scene, tally)
-    else:
-        end = rays.end[i]
-        if end == TOP:
-            exit_top(paths, i, d, sensor, tally)
-            keep = False
-        elif end == BOTTOM:
-            add_lost(tally, TRANSMITTED, paths.weight[i], paths.order[i])
-            keep = False
-        else:
-            paths.idle[i] += 1
-            o = wrap_side(o, d, t, end, scene.tile)
-    if keep and paths.idle[i] >= MAX_IDLE_SEGMENTS:
-        truncate(paths, i, tally)
-        keep = False
-    return keep, o, d
+            return not idled(paths, i, tally), o, d
+        if cut_at_max_order(paths, i, max_order, tally):
+            return False, o, d
+        return interact(paths, i, h, d, s, scene, tally)
+    end = rays.end[i]
+    if end == TOP:
+        exit_top(paths, i, d, sensor, tally)
+        return False, o, d
+    if end == BOTTOM:
+        add_lost(tally, TRANSMITTED, paths.weight[i], paths.order[i])
+        return False, o, d
+    o = wrap_side(o, d, t, end, scene.tile)
+    return not idled(paths, i, tally), o, d
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
@@ -116,13 +107,9 @@ def interact(paths, i, h, d, s, scene, tally):
     p, n = surface_point(scene.shape_code[s], scene.shape_params[s], h)
     m = scene.shape_material[s]
     d, factor, cut = scatter(scene.material_code[m], scene.material_params[m], paths.rng, i, d, n)
-    w = paths.weight[i]
     if paths.order[i] == 0:
         paths.from_base[i] = m == scene.base_material
-    add_interaction(tally, w, paths.order[i], factor, cut)
-    paths.weight[i] = w * factor
-    paths.order[i] += 1
-    if not survives_interaction(paths, i, tally):
+    if not interacted(paths, i, factor, cut, tally):
         return False, p, d
     paths.idle[i] = 0
     offset = clearance(p, scene.shape_size[s])

@@ -41,7 +41,7 @@ from .. import embree
 from ..materials import scatter
 from ..physics.distributions import sample_slope
 from ..physics.rng import uniform
-from .events import add_interaction, begin_path, exit_top, survives_interaction, truncate
+from .events import begin_path, cut_at_max_order, exit_top, interacted, truncate
 from .records import SEGMENTS, SINGLE_ALBEDO, Beam
 from .scheduler import CHUNK_PATHS, chunk_tally, compile_tally_sums, trace_in_waves, wave_rows, workspace
 
@@ -62,6 +62,14 @@ class Grooves(NamedTuple):
     roughness_y: float
     material_code: int
     material_params: np.ndarray
+
+
+class GrooveWorld(NamedTuple):
+    """What a path's meeting with its groove reads: the grooves' law, and the canonical groove's
+    Embree scene (0 for the analytic intersector)."""
+
+    grooves: Grooves
+    handle: object
 
 
 #: facets of a groove, as :func:`meet_analytic` and :func:`meet_embree` name them; NONE: no facet
@@ -97,13 +105,15 @@ class VCavityTracer:
         grooves, sensor = self.scene.grooves, self.sensor.toward(beam.wi)
         work = workspace(wave_rows(n_paths, self.threads), sensor.tally_width, self.log_rays, len(beam.albedo_scale))
         if self.embree is None:
-            def share(first, start, stop):
-                trace_chunks_analytic(first, start, stop, beam, grooves, sensor, work)
-        else:
-            handle = self.embree.arrays()
+            world = GrooveWorld(grooves, 0)
 
             def share(first, start, stop):
-                trace_chunks_embree(first, start, stop, beam, grooves, handle, sensor, work)
+                trace_chunks_analytic(first, start, stop, beam, world, sensor, work)
+        else:
+            world = GrooveWorld(grooves, self.embree.arrays())
+
+            def share(first, start, stop):
+                trace_chunks_embree(first, start, stop, beam, world, sensor, work)
         total = trace_in_waves(beam, sensor.tally_width, self.threads, work, share)
         self.ray_log = work.log[:min(work.logged[0], len(work.log))]
         return total
@@ -116,42 +126,42 @@ class VCavityTracer:
         beam = Beam(np.array([0.0, 0.0, 1.0]), np.uint64(0), 0, 0, np.ones(albedos))
         grooves = Grooves(0, 0.5, 0.5, 0, np.zeros(2))
         work = workspace(1, sensor.tally_width, albedos=albedos)
-        trace_chunks_analytic(0, 0, 0, beam, grooves, sensor, work)
+        trace_chunks_analytic(0, 0, 0, beam, GrooveWorld(grooves, 0), sensor, work)
         compile_tally_sums(beam, work)
         try:
             embree.available()
         except embree.EmbreeUnavailable:
             return
         handle = embree.SceneHandle(0, np.zeros(1, np.int64), np.ones(2))
-        trace_chunks_embree(0, 0, 0, beam, grooves, handle, sensor, work)
+        trace_chunks_embree(0, 0, 0, beam, GrooveWorld(grooves, handle), sensor, work)
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def trace_chunks_analytic(first, start, stop, beam, grooves, sensor, work):
+def trace_chunks_analytic(first, start, stop, beam, world, sensor, work):
     """Chunks first+start .. first+stop-1 of the beam, chunk first+j into tally row j (:func:`meet_analytic`)."""
-    trace_chunks(first, start, stop, beam, grooves, sensor, work, meet_analytic, 0)
+    trace_chunks(first, start, stop, beam, world, sensor, work, meet_analytic)
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def trace_chunks_embree(first, start, stop, beam, grooves, handle, sensor, work):
+def trace_chunks_embree(first, start, stop, beam, world, sensor, work):
     """Chunks first+start .. first+stop-1 of the beam, chunk first+j into tally row j (:func:`meet_embree`)."""
-    trace_chunks(first, start, stop, beam, grooves, sensor, work, meet_embree, handle)
+    trace_chunks(first, start, stop, beam, world, sensor, work, meet_embree)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def trace_chunks(first, start, stop, beam, grooves, sensor, work, meet, handle):
+def trace_chunks(first, start, stop, beam, world, sensor, work, meet):
     for j in range(start, stop):
         tally = chunk_tally(work, j, beam)
         chunk = first + j
         for number in range(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths)):
-            trace_path(work, j, number, beam, grooves, sensor, tally, meet, handle)
+            trace_path(work, j, number, beam, world, sensor, tally, meet)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def trace_path(work, row, number, beam, grooves, sensor, tally, meet, handle):
+def trace_path(work, row, number, beam, world, sensor, tally, meet):
     """Path ``number`` of the beam, in ``row`` of the workspace, from its groove's aperture until
     it leaves, is absorbed or is truncated (module doc)."""
-    paths = work.paths
+    paths, grooves = work.paths, world.grooves
     begin_path(paths, row, number, beam.key)
     sx, sy = sample_slope(grooves.distribution, grooves.roughness_x, grooves.roughness_y, paths.rng, row)
     slope = math.sqrt(sx * sx + sy * sy)
@@ -165,7 +175,7 @@ def trace_path(work, row, number, beam, grooves, sensor, tally, meet, handle):
     while True:
         du = d[0] * cu + d[1] * su
         dz = d[2]
-        facet, t = meet(handle, work, row, x, z, du, dz, h, last)
+        facet, t = meet(world, work, row, (x, z), (du, dz), h, last)
         tally.counts[SEGMENTS] += 1
         if facet == NONE:
             if dz > 0.0:
@@ -173,8 +183,7 @@ def trace_path(work, row, number, beam, grooves, sensor, tally, meet, handle):
             else:  # along the axis, level: it meets neither a facet nor the aperture
                 truncate(paths, row, tally)
             return
-        if beam.max_order > 0 and paths.order[row] >= beam.max_order:
-            truncate(paths, row, tally)
+        if cut_at_max_order(paths, row, beam.max_order, tally):
             return
         x = x + t * du
         if facet == LEFT:
@@ -186,21 +195,18 @@ def trace_path(work, row, number, beam, grooves, sensor, tally, meet, handle):
             z = -h * (1.0 - x)
             n = (-sin_m * cu, -sin_m * su, cos_m)
         d, factor, cut = scatter(grooves.material_code, grooves.material_params, paths.rng, row, d, n)
-        w = paths.weight[row]
-        add_interaction(tally, w, paths.order[row], factor, cut)
-        paths.weight[row] = w * factor
-        paths.order[row] += 1
-        if not survives_interaction(paths, row, tally):
+        if not interacted(paths, row, factor, cut, tally):
             return
         last = facet
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def meet_analytic(handle, work, row, x, z, du, dz, h, last):
-    """(facet or NONE, t) where the ray from (x, z) moving by (du, dz) leaves the groove's
-    cross-section: the smallest t at which it crosses a side going outwards (module doc). The
-    facet ``last`` that the ray leaves is not a candidate (the region is convex: a direction
-    scattered off a facet that rounds to grazing cannot meet it again)."""
+def meet_analytic(world, work, row, position, motion, h, last):
+    """(facet or NONE, t) where the ray from ``position`` (x, z) moving by ``motion`` (du, dz)
+    leaves the groove's cross-section: the smallest t at which it crosses a side going outwards
+    (module doc). The facet ``last`` that the ray leaves is not a candidate (the region is convex:
+    a direction scattered off a facet that rounds to grazing cannot meet it again)."""
+    (x, z), (du, dz) = position, motion
     t, facet = math.inf, NONE
     if dz > 0.0:
         t = -z / dz
@@ -223,8 +229,9 @@ def facet_distance(height, rate):
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def meet_embree(handle, work, row, x, z, du, dz, h, last):
+def meet_embree(world, work, row, position, motion, h, last):
     """:func:`meet_analytic` by Embree on the canonical groove (module doc)."""
+    (x, z), (du, dz) = position, motion
     cx, cz, cdz = x, z / h, dz / h
     if last == LEFT:
         cx, cz = cx + EMBREE_OFFSET * _SQRT_HALF, cz + EMBREE_OFFSET * _SQRT_HALF
@@ -241,7 +248,7 @@ def meet_embree(handle, work, row, x, z, du, dz, h, last):
             work.log[k, 0], work.log[k, 1], work.log[k, 2] = record.org_x, record.org_y, record.org_z
             work.log[k, 3], work.log[k, 4], work.log[k, 5] = record.dir_x, record.dir_y, record.dir_z
             work.log[k, 6] = record.tfar
-    embree.trace(handle.handle, records, row)
+    embree.trace(world.handle.handle, records, row)
     record = records[row]
     if record.geomID == embree.INVALID_ID:
         return NONE, 0.0

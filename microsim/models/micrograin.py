@@ -260,8 +260,11 @@ def _visible_half_width(dx, dy, dz, h, r):
 
 
 @numba.njit(cache=True)
-def _azimuthal_terms(wi, wo, phi, r, h, beta_x, beta_y, eta, k, interface):
-    """(i.m)+ (o.m)+ T(i, o, m) |E m'| at unit-space normal m' = (r cos phi, r sin phi, h)."""
+def _azimuthal_terms(wi, wo, phi, ring, betas, optics):
+    """(i.m)+ (o.m)+ T(i, o, m) |E m'| at unit-space normal m' = (r cos phi, r sin phi, h), with
+    ``ring`` = (r, h), ``betas`` = (beta_x, beta_y) and ``optics`` = (eta, k, whether the grains
+    have an interface, T = 1 - F)."""
+    (r, h), (beta_x, beta_y), (eta, k, interface) = ring, betas, optics
     ex = beta_x * r * math.cos(phi)
     ey = beta_y * r * math.sin(phi)
     length = math.sqrt(ex * ex + ey * ey + h * h)
@@ -274,11 +277,13 @@ def _azimuthal_terms(wi, wo, phi, r, h, beta_x, beta_y, eta, k, interface):
 
 
 @numba.njit(cache=True)
-def _segment_integral(wi, wo, lo, hi, anchor, eps, r, h, beta_x, beta_y, eta, k, interface, px, pw):
-    """Integral over phi' in [lo, hi] by Gauss-Legendre in u, phi' = anchor + eps sinh(u).
+def _segment_integral(wi, wo, arc, sinh_map, ring, betas, optics, rule):
+    """Integral over phi' in ``arc`` = [lo, hi] by the Gauss-Legendre ``rule`` (nodes, weights) in u,
+    phi' = anchor + eps sinh(u), ``sinh_map`` = (anchor, eps).
 
     The sinh map (Johnston & Elliott 2005) resolves a near-singularity at anchor +- i eps.
     """
+    (lo, hi), (anchor, eps), (px, pw) = arc, sinh_map, rule
     u_lo = math.asinh((lo - anchor) / eps)
     u_hi = math.asinh((hi - anchor) / eps)
     mid = 0.5 * (u_lo + u_hi)
@@ -287,13 +292,14 @@ def _segment_integral(wi, wo, lo, hi, anchor, eps, r, h, beta_x, beta_y, eta, k,
     for q in range(px.shape[0]):
         u = mid + half * px[q]
         phi = anchor + eps * math.sinh(u)
-        total += pw[q] * eps * math.cosh(u) * _azimuthal_terms(wi, wo, phi, r, h, beta_x, beta_y, eta, k, interface)
+        total += pw[q] * eps * math.cosh(u) * _azimuthal_terms(wi, wo, phi, ring, betas, optics)
     return half * total
 
 
 @numba.njit(cache=True)
-def _arc_integral(wi, wo, lo, hi, r, h, beta_x, beta_y, eta, k, interface, px, pw):
-    """Integral over the azimuth arc [lo, hi] of ``_azimuthal_terms``.
+def _arc_integral(wi, wo, arc, ring, betas, optics, rule):
+    """Integral over the azimuth ``arc`` = [lo, hi] of ``_azimuthal_terms``, by the Gauss-Legendre
+    ``rule`` (nodes, weights).
 
     For elongated grains |E m'| has complex zeros at phi_s +- i eps, phi_s the azimuths of the
     short axis (period pi) and eps^2 = (r^2 beta_min^2 + h^2) / (r^2 (beta_max^2 - beta_min^2)):
@@ -301,6 +307,7 @@ def _arc_integral(wi, wo, lo, hi, r, h, beta_x, beta_y, eta, k, interface, px, p
     inside it (and half-way between two of them), and each piece uses the sinh map about its
     nearest phi_s; isotropic grains (and eps > 1) take plain Gauss-Legendre.
     """
+    (lo, hi), (r, h), (beta_x, beta_y), (px, pw) = arc, ring, betas, rule
     lo_beta = min(beta_x, beta_y)
     spread = max(beta_x, beta_y) ** 2 - lo_beta**2
     eps = math.inf
@@ -311,7 +318,7 @@ def _arc_integral(wi, wo, lo, hi, r, h, beta_x, beta_y, eta, k, interface, px, p
         half = 0.5 * (hi - lo)
         total = 0.0
         for q in range(px.shape[0]):
-            total += pw[q] * _azimuthal_terms(wi, wo, mid + half * px[q], r, h, beta_x, beta_y, eta, k, interface)
+            total += pw[q] * _azimuthal_terms(wi, wo, mid + half * px[q], ring, betas, optics)
         return half * total
     phase = 0.0 if beta_x < beta_y else 0.5 * math.pi
     cuts = np.empty(12)
@@ -338,7 +345,7 @@ def _arc_integral(wi, wo, lo, hi, r, h, beta_x, beta_y, eta, k, interface, px, p
             anchor = c1
         else:
             anchor = phase + math.pi * math.floor((0.5 * (c0 + c1) - phase) / math.pi + 0.5)
-        total += _segment_integral(wi, wo, c0, c1, anchor, eps, r, h, beta_x, beta_y, eta, k, interface, px, pw)
+        total += _segment_integral(wi, wo, (c0, c1), (anchor, eps), ring, betas, optics, rule)
     return total
 
 
@@ -365,12 +372,13 @@ def _arc_integral_isotropic(wi, wo, lo, hi, r, h, beta):
 
 
 @numba.njit(cache=True)
-def _azimuthal_integral(wi, wo, a, b, h, beta_x, beta_y, eta, k, interface, px, pw):
+def _azimuthal_integral(wi, wo, a, b, h, betas, optics, rule):
     """(1/2pi) integral over phi' of (i.m)+ (o.m)+ T(i, o, m) |E m'|, m' = (r cos, r sin, h).
 
     Only the azimuths where both i'.m' > 0 and o'.m' > 0 contribute: at most two arcs. Closed
     form for isotropic Lambertian grains, quadrature otherwise.
     """
+    (beta_x, beta_y), interface = betas, optics[2]
     r = math.sqrt(max(1.0 - h * h, 0.0))
     half_a = _visible_half_width(a[0], a[1], a[2], h, r)
     half_b = _visible_half_width(b[0], b[1], b[2], h, r)
@@ -385,19 +393,24 @@ def _azimuthal_integral(wi, wo, a, b, h, beta_x, beta_y, eta, k, interface, px, 
         if beta_x == beta_y and not interface:
             total += _arc_integral_isotropic(wi, wo, centre + lo, centre + hi, r, h, beta_x)
         else:
-            total += _arc_integral(wi, wo, centre + lo, centre + hi, r, h, beta_x, beta_y, eta, k, interface, px, pw)
+            total += _arc_integral(wi, wo, (centre + lo, centre + hi), (r, h), betas, optics, rule)
     return total / (2.0 * math.pi)
 
 
 @numba.njit(cache=True)
-def _micrograin_kernel(wi, wo, tau0, beta_x, beta_y, material, albedo, eta, k, base_brdf, correlated, hx, hw, px, pw):
+def _micrograin_kernel(wi, wo, field, surface, base_brdf, correlated, heights, azimuths):
     """f(i, o) of Eq. 20 for pairs of directions (N, 3), both above the horizon.
 
-    ``material`` is the grains' kind code (:mod:`microsim.materials`): the diffuse term for
-    lambert and interfaced_lambert (with T), the specular term for all but lambert.
+    ``field`` = (tau0, beta_x, beta_y); ``surface`` = (the grains' material kind code
+    (:mod:`microsim.materials`), albedo, eta, k): the diffuse term for lambert and
+    interfaced_lambert (with T), the specular term for all but lambert; ``heights`` and
+    ``azimuths``: the Gauss rules (nodes, weights) of the diffuse term's two integrals.
     """
+    (tau0, beta_x, beta_y), (material, albedo, eta, k), (hx, hw) = field, surface, heights
+    betas = (beta_x, beta_y)
     diffuse_grains = (material == LAMBERT or material == INTERFACED_LAMBERT) and albedo > 0.0
     interface = material == INTERFACED_LAMBERT
+    optics = (eta, k, interface)
     specular = material != LAMBERT
     lam = grain_extinction(tau0)
     rate = lam / math.pi
@@ -426,7 +439,7 @@ def _micrograin_kernel(wi, wo, tau0, beta_x, beta_y, material, albedo, eta, k, b
                     h = mid + half * hx[q]
                     density = 2.0 * lam * math.exp(-lam * (1.0 - h * h)) / tau0
                     visible = math.exp(-rate * shadowed_area(a[0], a[1], a[2], b[0], b[1], b[2], h, correlated))
-                    azimuthal = _azimuthal_integral(i, o, a, b, h, beta_x, beta_y, eta, k, interface, px, pw)
+                    azimuthal = _azimuthal_integral(i, o, a, b, h, betas, optics, azimuths)
                     diffuse += half * hw[q] * density * visible * azimuthal
             grains += albedo / math.pi * diffuse / i[2] / o[2]
         if specular:
@@ -460,10 +473,8 @@ class Micrograin(MicrograinParams, gaf=GAF):
         self._azimuth_rule = np.polynomial.legendre.leggauss(AZIMUTH_NODES)
 
     def _eval(self, wi, wo):
-        hx, hw = self._height_rule
-        px, pw = self._azimuth_rule
         eta, k = self.index
         return _micrograin_kernel(
-            wi, wo, self.tau0, self.beta_x, self.beta_y, self.material_code, self.albedo, eta, k,
-            self.base_brdf, self.gaf == "correlated", hx, hw, px, pw,
+            wi, wo, (self.tau0, self.beta_x, self.beta_y), (self.material_code, self.albedo, eta, k),
+            self.base_brdf, self.gaf == "correlated", self._height_rule, self._azimuth_rule,
         )

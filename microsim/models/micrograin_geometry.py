@@ -167,8 +167,10 @@ def _wrap(angle):
 
 
 @numba.njit(cache=True)
-def _nearer_fan_area(alpha1, alpha2, ax, ay, az, bx, by, bz, h):
-    """Fan of the nearer of E_h(a), E_h(b) between polar angles alpha1 <= alpha2, minus the disc sector."""
+def _nearer_fan_area(alpha1, alpha2, a, b, h):
+    """Fan of the nearer of E_h(a), E_h(b) (a, b: unit directions as 3-tuples) between polar angles
+    alpha1 <= alpha2, minus the disc sector."""
+    (ax, ay, az), (bx, by, bz) = a, b
     if alpha2 <= alpha1:
         return 0.0
     mid = 0.5 * (alpha1 + alpha2)
@@ -234,9 +236,10 @@ def overlap_area(ax, ay, az, bx, by, bz, h):
                         first, second = psi, first
                     elif lo < psi < second:
                         second = psi
-    area = _nearer_fan_area(centre + lo, centre + first, ax, ay, az, bx, by, bz, h)
-    area += _nearer_fan_area(centre + first, centre + second, ax, ay, az, bx, by, bz, h)
-    area += _nearer_fan_area(centre + second, centre + hi, ax, ay, az, bx, by, bz, h)
+    a, b = (ax, ay, az), (bx, by, bz)
+    area = _nearer_fan_area(centre + lo, centre + first, a, b, h)
+    area += _nearer_fan_area(centre + first, centre + second, a, b, h)
+    area += _nearer_fan_area(centre + second, centre + hi, a, b, h)
     return max(area, 0.0)
 
 
