@@ -43,10 +43,19 @@ def variance_model(sim, stderr, signal, projected) -> tuple[np.ndarray, np.ndarr
     with signal as sum(stderr_C^2 P_C) / sum(f_C), and VARIANCE_FLOOR x their mean value. If the
     table's BRDF were m_C, cell C would have variance k max(m_C, floor) / P_C (the realizations'
     share included in k, as an average: :func:`predicted_variance` takes it apart)."""
-    total = np.sum(np.where(signal, sim, 0.0), axis=1)
+    total = _over_signal(sim, signal)
     count = np.maximum(signal.sum(axis=1), 1)
-    dispersion = np.sum(np.where(signal, stderr**2 * projected, 0.0), axis=1) / np.where(total > 0, total, 1.0)
-    return dispersion, VARIANCE_FLOOR * total / count
+    return _over_signal(stderr**2 * projected, signal) / _positive(total), VARIANCE_FLOOR * total / count
+
+
+def _over_signal(values, signal) -> np.ndarray:
+    """(n_i,) sums of ``values`` over each incidence's cells with signal."""
+    return np.sum(np.where(signal, values, 0.0), axis=1)
+
+
+def _positive(values) -> np.ndarray:
+    """``values`` with zeros (an incidence without a cell of signal) taken as 1: a ratio of 0."""
+    return np.where(values > 0, values, 1.0)
 
 
 def predicted_variance(model_values, sim, stderr, signal, projected, scale) -> tuple[np.ndarray, ...]:
@@ -56,9 +65,8 @@ def predicted_variance(model_values, sim, stderr, signal, projected, scale) -> t
     k less what the realizations add to it, g sum(f_C^2 P_C) / sum(f_C) (at least
     VARIANCE_FLOOR of k)."""
     dispersion, floor = variance_model(sim, stderr, signal, projected)
-    total = np.sum(np.where(signal, sim, 0.0), axis=1)
-    squares = np.sum(np.where(signal, sim**2 * projected, 0.0), axis=1)
-    own = np.maximum(dispersion - scale * squares / np.where(total > 0, total, 1.0), VARIANCE_FLOOR * dispersion)
+    shared = scale * _over_signal(sim**2 * projected, signal) / _positive(_over_signal(sim, signal))
+    own = np.maximum(dispersion - shared, VARIANCE_FLOOR * dispersion)
     per_path = own[:, None] / projected
     floored = np.maximum(model_values, floor[:, None])
     common = scale[:, None] * model_values**2

@@ -25,7 +25,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from .materials import MATERIALS, evaluate, pdf, scatter
+from .materials import evaluate, pdf, row_length, scatter
 from .physics.rng import path_state
 from .physics.sampling import orthonormal_basis, reflect
 
@@ -78,23 +78,8 @@ def _density(code, prm, wi, n, wos, kernel):
     return out
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def _scatter(code, prm, states, i, d, n):
-    return scatter(code, prm, states, i, d, n)
-
-
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def _evaluate(code, prm, wi, wo, n):
-    return evaluate(code, prm, wi, wo, n)
-
-
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def _pdf(code, prm, wi, wo, n):
-    return pdf(code, prm, wi, wo, n)
-
-
 def material_check(material, theta_i_deg: float, samples: int = 200_000, seed: int = 1,
-                   normal=(0.3, -0.2, 0.9), grid=(20, 40), sample=_scatter) -> MaterialCheck:
+                   normal=(0.3, -0.2, 0.9), grid=(20, 40), sample=scatter) -> MaterialCheck:
     """The three statistics of ``material`` (a validated material section, e.g.
     ``MATERIALS["lambert"](kind="lambert", albedo=0.5)``) for light arriving at ``theta_i_deg``
     from the shading normal ``normal``; ``sample`` replaces :func:`~microsim.materials.scatter`
@@ -105,10 +90,10 @@ def material_check(material, theta_i_deg: float, samples: int = 200_000, seed: i
     t, s = (np.array(v) for v in orthonormal_basis(tuple(n)))
     theta = np.radians(theta_i_deg)
     wi = np.sin(theta) * t + np.cos(theta) * n
-    row = np.zeros(max(m.row_size() for m in MATERIALS.values()))
+    row = np.zeros(row_length())
     row[: len(material.row())] = material.row()
     args = (material.code, row, tuple(wi), tuple(n))
-    directions, weights, delta = _draw(*args[:2], args[2], args[3], samples, np.uint64(seed), sample)
+    directions, weights, delta = _draw(*args, samples, np.uint64(seed), sample)
 
     # bins in (cos theta, phi) of the normal's frame; the rules' nodes per bin
     n_cos, n_phi = grid
@@ -122,7 +107,7 @@ def material_check(material, theta_i_deg: float, samples: int = 200_000, seed: i
     summed = np.bincount(flat, weights=weights[keep], minlength=n_cos * n_phi)
     squares = np.bincount(flat, weights=weights[keep] ** 2, minlength=n_cos * n_phi)
     expected_pdf, expected_eval = (samples * _bin_integrals(args, kernel, n_cos, n_phi, t, s, n)
-                                   for kernel in (_pdf, _evaluate))
+                                   for kernel in (pdf, evaluate))
 
     # the counts: Pearson's chi-square, sparse bins pooled
     sparse = expected_pdf < MIN_EXPECTED
@@ -173,6 +158,6 @@ def _bin_integrals(args, kernel, n_cos, n_phi, t, s, n, nodes: int = 6) -> np.nd
     sin = np.sqrt(np.maximum(1 - cc**2, 0.0))
     wos = (sin * np.cos(pp))[..., None] * t + (sin * np.sin(pp))[..., None] * s + np.broadcast_to(cc, sin.shape)[..., None] * n
     wos = np.broadcast_to(wos, (n_cos, n_phi, nodes, nodes, 3))
-    values = _density(args[0], args[1], args[2], args[3], np.ascontiguousarray(wos.reshape(-1, 3)), kernel)
+    values = _density(*args, np.ascontiguousarray(wos.reshape(-1, 3)), kernel)
     weights = np.outer(w, w) * 0.25 * (1.0 / n_cos) * (2 * np.pi / n_phi)
     return np.sum(values.reshape(n_cos, n_phi, nodes, nodes) * weights, axis=(2, 3)).reshape(-1)
