@@ -30,7 +30,7 @@ import numpy as np
 
 from microsim import config, models, runner
 from microsim.physics.boolean_model import radius_over_free_path
-from microsim.integrators.records import RESULT_ALL_ORDERS
+from microsim.orders import RESULT_ALL_ORDERS
 from microsim.models.radiative_transfer import single_scattering
 from report import OUT, save_figures
 

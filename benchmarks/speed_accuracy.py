@@ -32,7 +32,7 @@ import numpy as np
 
 from geometry import poisson_spheres
 from microsim import compare, config, runner
-from microsim.integrators.records import RESULT_ALL_ORDERS
+from microsim.orders import RESULT_ALL_ORDERS
 from report import OUT, save_figures
 
 THETA_I_DEG = [0.0, 60.0, 85.0]

@@ -32,7 +32,8 @@ import numpy as np
 from geometry import poisson_spheres
 from microsim import config as config_module
 from microsim import runner
-from microsim.integrators.records import RESULT_ALL_ORDERS, TRANSMITTED
+from microsim.orders import RESULT_ALL_ORDERS
+from microsim.tally import TRANSMITTED
 from report import OUT, save_figures
 
 THETA_I_DEG = [0.0, 60.0, 85.0]

@@ -26,7 +26,7 @@ import numpy as np
 import geometry
 from microsim import config as config_module
 from microsim import runner
-from microsim.integrators.records import RESULT_ALL_ORDERS
+from microsim.orders import RESULT_ALL_ORDERS
 
 OUT = Path(__file__).resolve().parent / "out"
 EXACT = "exact"

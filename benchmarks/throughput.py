@@ -48,7 +48,9 @@ import numpy as np
 
 from microsim import config as config_module
 from microsim import runner
-from microsim.integrators.records import SEGMENTS, Beam
+from microsim.estimators import DEFAULT, build
+from microsim.integrators.records import Beam
+from microsim.tally import SEGMENTS
 from microsim.integrators.direct import DirectBackend
 from microsim.integrators.embreex import EmbreexBackend, embree_scene
 from microsim.physics.rng import geometry_rng, stream_key
@@ -92,7 +94,7 @@ def realization(cfg, **scene_keys):
 def wavefront_trace(scene, sensor, run, beam):
     """Trace ``beam`` with the wavefront loop on ``run``; (seconds, tally, recorder)."""
     recorder = Recorder(run)
-    backend = EmbreexBackend(scene, embree=recorder)
+    backend = EmbreexBackend(scene, build(DEFAULT, sensor), embree=recorder)
     start = time.perf_counter()
     tally = backend.trace(beam, scene.arrays(), sensor)
     return time.perf_counter() - start, tally, recorder
@@ -119,7 +121,7 @@ def replay_direct(logger) -> float:
 
 def fused_trace(scene, sensor, beam, threads: int, log_rays: int = 0):
     """(seconds, tally, backend) of the direct backend tracing ``beam``."""
-    backend = DirectBackend(scene, threads, log_rays)
+    backend = DirectBackend(scene, build(DEFAULT, sensor), threads, log_rays)
     start = time.perf_counter()
     tally = backend.trace(beam, scene.arrays(), sensor)
     return time.perf_counter() - start, tally, backend

@@ -35,7 +35,7 @@ import numpy as np
 
 import geometry
 from microsim import config, embree, runner, tables
-from microsim.integrators.records import SEGMENTS
+from microsim.tally import SEGMENTS
 from microsim.integrators import vcavity
 from microsim.integrators.vcavity import VCavityTracer, meet_analytic
 from microsim.integrators.embreex import embree_scene

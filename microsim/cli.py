@@ -27,7 +27,7 @@ from pathlib import Path
 import click
 
 from .compare import ORDER_ROWS
-from .integrators.records import RESULT_ALL_ORDERS
+from .orders import RESULT_ALL_ORDERS
 
 # The modules of the work itself (config and geometry, numba, h5py, the models) are imported by
 # each command as it needs them: --help, `models` and a refused argument answer without them.
@@ -609,7 +609,7 @@ def _energy_notes(plan, result) -> list[str]:
     """One line for each kind of lost energy (transmitted, truncated) that exceeds the albedo's
     standard error at some incidence: there the albedo is short of the scene's by more than
     its noise (the table's energy/ datasets hold every incidence)."""
-    from .integrators.records import ENERGY_NAMES
+    from .tally import ENERGY_NAMES
 
     lines = []
     for name, cause in ENERGY_CAUSES.items():

@@ -57,6 +57,7 @@ def trace_units(plan, units, emit) -> None:
     """Trace ``units`` in order in this process, calling ``emit(unit, tally, scene_info)`` after
     each; the scene of a realization is built once for its consecutive units."""
     sensor = plan.build_sensor()
+    estimators = plan.build_estimators(sensor)
     generator = plan.generator
     seed, max_order = plan.config.run.seed, plan.config.run.max_order
     current, tracer = None, None
@@ -64,7 +65,7 @@ def trace_units(plan, units, emit) -> None:
         if r != current:
             scene = tracer = None  # the previous realization's scene and acceleration structure go first
             scene = generator.generate(plan.scene, plan.config, geometry_rng(seed, r))
-            tracer = plan.tracer_class(scene, sensor, **plan.tracer_options)
+            tracer = plan.tracer_class(scene, sensor, estimators=estimators, **plan.tracer_options)
             current = r
         tally = tracer.trace(plan.incidence_direction(i), plan.paths_per_realization, stream_key(seed, r, i),
                              max_order, plan.albedo_scale)

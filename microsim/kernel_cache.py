@@ -8,14 +8,16 @@ the surface tracer would keep running the old ``scatter``. :func:`install` wraps
 cache locators, in numba's own order (so ``NUMBA_CACHE_DIR`` and read-only installs behave as
 usual), so that a kernel defined in the microsim package, or in the checkout's benchmarks/ and
 tests/ (which call them), is stamped with its own file's stamp and the hash of every source of
-microsim and of geometry (its generators hand kernels their records and constants): any edit of
-either recompiles them all (README, numba caches).
+microsim and of geometry (its generators hand kernels their records and constants), and of every
+plugin registered from another module (:func:`add_plugin_source`): any edit of them recompiles
+them all (README, numba caches).
 """
 
 from __future__ import annotations
 
 import functools
 import hashlib
+import pickle
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parent
@@ -23,6 +25,9 @@ PACKAGE = Path(__file__).resolve().parent
 STAMP_SOURCES = (PACKAGE, PACKAGE.parent / "geometry")
 #: files whose kernels get the package stamp: the package, and the checkout's callers of it
 STAMPED = (PACKAGE, PACKAGE.parent / "benchmarks", PACKAGE.parent / "tests")
+#: files outside STAMP_SOURCES that hold kernels compiled into microsim's (a hook, a transport or
+#: a material kind registered from another module: :func:`add_plugin_source`)
+PLUGIN_SOURCES: set[Path] = set()
 
 
 def sources(root: Path = PACKAGE) -> list[Path]:
@@ -46,6 +51,28 @@ def _digest(root: Path, files: tuple) -> bytes:
     return digest.digest()
 
 
+def add_plugin_source(path) -> None:
+    """The kernels of file ``path`` are compiled into microsim's (a registered plugin): stamp
+    microsim's kernels with it too, so that an edit of it recompiles them (unless it is one of
+    STAMP_SOURCES' files, which are stamped already)."""
+    path = Path(path).resolve()
+    if path.is_file() and not is_source(path):
+        PLUGIN_SOURCES.add(path)
+
+
+def is_source(path) -> bool:
+    """Whether ``path`` is a file of STAMP_SOURCES."""
+    return any(Path(path).resolve().is_relative_to(root) for root in STAMP_SOURCES)
+
+
+def plugin_stamp() -> bytes:
+    """SHA-256 over the contents of every file of PLUGIN_SOURCES (b"" when there is none)."""
+    if not PLUGIN_SOURCES:
+        return b""
+    files = tuple((p, p.stat().st_mtime_ns, p.stat().st_size) for p in sorted(PLUGIN_SOURCES))
+    return _digest(Path("/"), files)
+
+
 class PackageStamped:
     """Mixin of a numba cache locator: adds the package stamp to the stamp of a stamped file."""
 
@@ -53,7 +80,7 @@ class PackageStamped:
         stamp = super().get_source_stamp()
         py_file = getattr(self, "_py_file", None)
         if py_file is not None and is_stamped(Path(py_file)):
-            return stamp, *(package_stamp(root) for root in STAMP_SOURCES)
+            return stamp, *(package_stamp(root) for root in STAMP_SOURCES), plugin_stamp()
         return stamp
 
 
@@ -70,8 +97,29 @@ def cache_impl():
 
 
 def install() -> None:
-    """Wrap every numba cache locator with :class:`PackageStamped` (idempotent)."""
+    """Wrap every numba cache locator with :class:`PackageStamped`, and numba's reading of a
+    cache index with :func:`_tolerant` (idempotent)."""
+    from numba.core import caching
+
     locators = cache_impl()._locator_classes
     for j, locator in enumerate(locators):
         if not issubclass(locator, PackageStamped):
             locators[j] = type(locator.__name__, (PackageStamped, locator), {})
+    index = caching.IndexDataCacheFile
+    if not getattr(index._load_index, "tolerant", False):
+        index._load_index = _tolerant(index._load_index)
+
+
+def _tolerant(load_index):
+    """numba's ``_load_index``, except that an index it cannot unpickle is an empty one (stale: the
+    kernel is compiled again, and the index rewritten). An index names the types of the kernels
+    it holds; one compiled with a plugin's record (an estimator's tally defined in a module of its
+    own) cannot be read by a process that cannot import that module."""
+    def load(self):
+        try:
+            return load_index(self)
+        except (ImportError, AttributeError, pickle.UnpicklingError, EOFError):
+            return {}
+
+    load.tolerant = True
+    return load

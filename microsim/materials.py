@@ -7,11 +7,12 @@ row (the parameters in the order they are declared, and what the kernels derive 
 read by position) and its ``albedo_bound`` (used by generators for default slab depths).
 Defining a subclass registers it in ``MATERIALS`` (define kinds here: the config schema is built
 from the registry when :mod:`microsim.config` is imported); the config schema, the scene's
-material table and the generators all derive from that registry. Each definition is followed by
-the module constant of its code, the name the kernels compare with (numba reads module globals,
-not class attributes). A new kind costs its definition and one branch in each of the three
-kernels; a code that no definition holds is refused when a material table is built, and the
-kernels raise rather than fall through. ``tests/test_materials.py`` checks every registered kind's
+material table and the generators all derive from that registry. The definition holds the
+kind's kernels too, ``sample`` and ``lobes`` (Python in numba's subset), which the three kernels
+below compile for every registered kind, chosen by the kind's code: a new kind is its definition
+and nothing else (defined in this module: the switch over the kinds is built at its end). Each
+definition is followed by the module constant of its code, for code that names a kind (numba reads module globals, not class attributes). A code that no definition holds
+is refused when a material table is built, and the kernels raise rather than fall through. ``tests/test_materials.py`` checks every registered kind's
 sampling against its ``evaluate`` and ``pdf`` (a chi-square test on the hemisphere).
 
 The three kernels of one interaction, as pbrt's BxDFs and Mitsuba 3's BSDFs have them, with
@@ -73,6 +74,11 @@ class Material(Section):
             raise TypeError(f"material kind {name!r} (code {cls.code}) is defined twice")
         if not isinstance(getattr(cls, "example", None), dict):
             raise TypeError(f"material kind {name!r} needs an example (example: ClassVar[dict] = {{parameters}})")
+        if "sample" not in cls.__dict__:
+            raise TypeError(f"material kind {name!r} needs its sampling (a staticmethod sample(prm, states, i, d, n))")
+        if "sample_of_kind" in globals():
+            raise TypeError(f"material kind {name!r}: define material kinds in microsim/materials.py, where the "
+                            "kernels' switch over them is built")
         MATERIALS[name] = cls
 
     @classmethod
@@ -99,6 +105,22 @@ class Material(Section):
         1, all of it, unless the kind knows better."""
         return 1.0
 
+    # The kind's kernels: Python in numba's subset, compiled into :func:`scatter`, :func:`evaluate`
+    # and :func:`pdf` for every registered kind (module doc). ``prm`` is the kind's row.
+
+    @staticmethod
+    def sample(prm, states, i, d, n):
+        """Light arriving along d on the outward normal n: (wo, weight factor, fraction cut),
+        wo drawn with the random stream of row i of ``states`` (module doc, :func:`scatter`)."""
+        raise NotImplementedError
+
+    @staticmethod
+    def lobes(prm, albedo, wi, wo, n):
+        """f(wi, wo) |n . wo| of the lobes that are not a delta, with the diffuse albedo ``albedo``
+        in place of the row's (1 for :func:`pdf`), for wi and wo both above the surface; a kind
+        of delta lobes only keeps this 0."""
+        return 0.0
+
 
 def codes() -> set[int]:
     """Kind codes of every defined material."""
@@ -119,6 +141,10 @@ class Absorber(Material):
 
     def albedo_bound(self) -> float:
         return 0.0
+
+    @staticmethod
+    def sample(prm, states, i, d, n):
+        return d, 0.0, 0.0
 
 
 ABSORBER = Absorber.code
@@ -165,6 +191,14 @@ class Lambert(Material):
     def albedo_bound(self) -> float:
         return max(self.albedos)
 
+    @staticmethod
+    def sample(prm, states, i, d, n):
+        return sample_cosine(states, i, n), prm[0], 0.0
+
+    @staticmethod
+    def lobes(prm, albedo, wi, wo, n):
+        return albedo * (wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2]) / math.pi
+
 
 LAMBERT = Lambert.code
 
@@ -182,6 +216,11 @@ class Conductor(Material):
     def albedo_bound(self) -> float:
         cosines = np.linspace(0.0, 1.0, _CONDUCTOR_PROBES)
         return float(max(fresnel_conductor(c, self.eta, self.k) for c in cosines))
+
+    @staticmethod
+    def sample(prm, states, i, d, n):
+        cos_i = -(d[0] * n[0] + d[1] * n[1] + d[2] * n[2])
+        return reflect(d, n), fresnel_conductor(cos_i, prm[0], prm[1]), 0.0
 
 
 CONDUCTOR = Conductor.code
@@ -213,6 +252,16 @@ class InterfacedLambert(Material):
     def row_size(cls) -> int:
         return 3
 
+    @staticmethod
+    def sample(prm, states, i, d, n):
+        return _interfaced_lambert(prm[0], prm[1], states, i, d, n)
+
+    @staticmethod
+    def lobes(prm, albedo, wi, wo, n):
+        cos_i = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
+        cos_o = wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2]
+        return _interfaced_lambert_body(albedo, prm[1], prm[2], cos_i, cos_o) * cos_o
+
 
 INTERFACED_LAMBERT = InterfacedLambert.code
 
@@ -224,6 +273,10 @@ class Mirror(Material):
     code: ClassVar[int] = 4
     example: ClassVar[dict] = {}
 
+    @staticmethod
+    def sample(prm, states, i, d, n):
+        return reflect(d, n), 1.0, 0.0
+
 
 MIRROR = Mirror.code
 
@@ -234,20 +287,9 @@ def scatter(code, prm, states, i, d, n):
 
     ``d`` is the propagation direction of the arriving ray (pointing into the surface), ``n``
     the outward unit shading normal, ``prm`` the material's parameter row. A weight factor of 0
-    means the path ends.
+    means the path ends. The kind of code ``code`` samples (its ``sample``).
     """
-    if code == LAMBERT:
-        return sample_cosine(states, i, n), prm[0], 0.0
-    if code == CONDUCTOR:
-        cos_i = -(d[0] * n[0] + d[1] * n[1] + d[2] * n[2])
-        return reflect(d, n), fresnel_conductor(cos_i, prm[0], prm[1]), 0.0
-    if code == INTERFACED_LAMBERT:
-        return _interfaced_lambert(prm[0], prm[1], states, i, d, n)
-    if code == MIRROR:
-        return reflect(d, n), 1.0, 0.0
-    if code == ABSORBER:
-        return d, 0.0, 0.0
-    raise ValueError("scatter: unknown material kind code")
+    return sample_of_kind(code, prm, states, i, d, n)
 
 
 @numba.njit(cache=True, error_model="numpy", _nrt=False, inline="always")
@@ -266,18 +308,27 @@ def pdf(code, prm, wi, wo, n):
 
 @numba.njit(cache=True, error_model="numpy", _nrt=False, inline="always")
 def _continuous_lobes(code, prm, albedo, wi, wo, n):
-    """f |n . wo| of the lobes that are not a delta, with the diffuse kinds' albedo ``albedo``."""
+    """f |n . wo| of the lobes that are not a delta, with the diffuse kinds' albedo ``albedo``:
+    0 unless wi and wo are both above the surface, else the kind's ``lobes``."""
     cos_i = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
     cos_o = wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2]
     if cos_i <= 0.0 or cos_o <= 0.0:
         return 0.0
-    if code == LAMBERT:
-        return albedo * cos_o / math.pi
-    if code == INTERFACED_LAMBERT:
-        return _interfaced_lambert_body(albedo, prm[1], prm[2], cos_i, cos_o) * cos_o
-    if code == CONDUCTOR or code == MIRROR or code == ABSORBER:
-        return 0.0
-    raise ValueError("evaluate: unknown material kind code")
+    return lobes_of_kind(code, prm, albedo, wi, wo, n)
+
+
+def _switch(method: str, arguments: str):
+    """``method`` of every registered kind, chosen by ``code``: a numba function generated from
+    the registry (``if code == <kind's code>: return <kind's method>(...)``, the kinds in order
+    of definition), which kernels inline, each kind's function inlined in it. A code no kind
+    holds raises. Built once every kind of this module is defined (at the end of the module)."""
+    namespace, lines = {}, [f"def {method}_of_kind(code, {arguments}):"]
+    for j, kind in enumerate(MATERIALS.values()):
+        namespace[f"{method}_{j}"] = numba.njit(inline="always", error_model="numpy")(getattr(kind, method))
+        lines.append(f"    if code == {kind.code}:\n        return {method}_{j}({arguments})")
+    lines.append(f"    raise ValueError('{method}: unknown material kind code')")
+    exec("\n".join(lines), namespace)
+    return numba.njit(inline="always", error_model="numpy")(namespace[f"{method}_of_kind"])
 
 
 @numba.njit(cache=True, error_model="numpy", _nrt=False)
@@ -314,3 +365,8 @@ def _interfaced_lambert(albedo, eta, states, i, d, n):
             phi = 2.0 * math.pi * u2
             return from_local(sin_o * math.cos(phi), sin_o * math.sin(phi), cos_o, n), weight, 0.0
     return d, 0.0, weight
+
+
+#: the kernels' switches over every kind above (:func:`_switch`); a kind defined later is refused
+sample_of_kind = _switch("sample", "prm, states, i, d, n")
+lobes_of_kind = _switch("lobes", "prm, albedo, wi, wo, n")

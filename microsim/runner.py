@@ -27,13 +27,12 @@ import numpy as np
 import geometry
 
 from .frames import direction
-from . import embree, executors, integrators
+from . import embree, estimators, executors, integrators
 from .physics.rng import stream_key
 from .compile_watch import CompileWatch
 from .integrators import embreex, scheduler
-from .integrators.records import BASE_ROW, COUNT_NAMES, ENERGY_NAMES, ORDERS, RESULT_ALL_ORDERS, RESULT_ROWS, \
-    SINGLE_ALBEDO, TALLY_ROWS, per_albedo
 from .sensor import Sensor
+from .tally import COUNT_NAMES, ENERGY_NAMES, SINGLE_ALBEDO, per_albedo
 
 
 @dataclass
@@ -51,6 +50,7 @@ class Plan:
     backend_note: str  # why "auto" fell back to embreex ("" otherwise)
     threads: int = 1
     albedos: tuple = ()  # the material's albedos traced together (CONVENTIONS 4); () for one
+    estimator_names: tuple = estimators.DEFAULT  # the run's estimators (microsim.estimators)
 
     @property
     def albedo_scale(self) -> np.ndarray:
@@ -76,7 +76,8 @@ class Plan:
         config, substitution = generator.for_backend(config, backend)
         notes += [substitution] if substitution else []
         return cls(config, generator.resolve(config), theta, phi, config.sensor.cells, run.realizations,
-                   math.ceil(run.paths / run.realizations), backend, "; ".join(notes), threads, albedos_of(config))
+                   math.ceil(run.paths / run.realizations), backend, "; ".join(notes), threads, albedos_of(config),
+                   estimators.names_for(config))
 
     @property
     def n_incidences(self) -> int:
@@ -113,6 +114,10 @@ class Plan:
     @property
     def tracer_options(self) -> dict:
         return {"backend": self.backend, "threads": self.threads}
+
+    def build_estimators(self, sensor: Sensor) -> tuple:
+        """The run's estimators on its sensor (microsim.estimators)."""
+        return estimators.build(self.estimator_names, sensor, self)
 
 
 class PlanError(ValueError):
@@ -188,20 +193,30 @@ class Result:
     plan: Plan
     sensor: Sensor
     albedo_value: float | None  # the material albedo of these estimates, in a run of several (else None)
-    brdf: list  # per incidence: Estimate of f_C over (RESULT_ROWS, n_cells): the orders, all orders
-    #             (row RESULT_ALL_ORDERS), order 1 scattered by the base (row RESULT_ORDER1_BASE),
-    #             orders 1 and 2 (row RESULT_ORDERS12)
-    albedo: list  # per incidence: Estimate over (RESULT_ROWS,), rows as brdf's
+    estimators: tuple  # the run's estimators (microsim.estimators), which write their datasets
+    #: every estimator's estimates by name (microsim.estimators.Estimator.reduce), per incidence
+    estimates: dict
     energy: list  # per incidence: Estimate over (*ENERGY_NAMES, balance)
     counts: np.ndarray  # (n_incidences, len(COUNT_NAMES)) tracer event counts
     scene_info: dict = field(default_factory=dict)  # realization -> info of the generated scene
     wall_time: float = 0.0
-    #: per incidence, if the sensor has retro rings: Estimate of f over (RESULT_ROWS, rings), rows as
-    #: brdf's, and the rings' projected solid angles about that incidence (n_rings,)
-    retro: list = field(default_factory=list)
-    retro_projected_solid_angle: list = field(default_factory=list)
     units_resumed: int = 0  # units taken from a unit store (microsim.unit_store)
     units_traced: int = 0  # units traced by this call
+
+    @property
+    def brdf(self) -> list:
+        """Per incidence: Estimate of the cell-averaged BRDF over (RESULT_ROWS, cells) (microsim.orders)."""
+        return self.estimates["brdf"]
+
+    @property
+    def albedo(self) -> list:
+        """Per incidence: Estimate of the albedo over (RESULT_ROWS,), rows as brdf's."""
+        return self.estimates["albedo"]
+
+    @property
+    def retro(self) -> list:
+        """Per incidence, if the sensor has retro rings: Estimate of f over (RESULT_ROWS, rings)."""
+        return self.estimates.get("brdf_retro", [])
 
     @property
     def paths(self) -> np.ndarray:
@@ -209,23 +224,17 @@ class Result:
 
 
 class _Reducer:
-    """Sums unit tallies in unit order, buffering those that arrive early; one Result per albedo."""
+    """Sums unit tallies in unit order, buffering those that arrive early; one Result per albedo.
+    Each estimator reduces its own fields (by name); the reducer keeps the mean and standard
+    error of every estimate over the realizations, and the energy balance."""
 
     def __init__(self, plan: Plan, sensor: Sensor):
-        n_i, n_c = plan.n_incidences, sensor.n_cells
-        self.plan = plan
-        self.results = [Result(
-            plan, sensor, value,
-            [Estimate.zeros((RESULT_ROWS, n_c)) for _ in range(n_i)],
-            [Estimate.zeros(RESULT_ROWS) for _ in range(n_i)],
-            [Estimate.zeros(len(ENERGY_NAMES) + 1) for _ in range(n_i)],
-            np.zeros((n_i, len(COUNT_NAMES)), np.int64),
-        ) for value in (plan.albedos or (None,))]
-        if sensor.retro_rings:
-            projected = [sensor.retro_projected_solid_angle(plan.incidence_direction(i)) for i in range(n_i)]
-            for result in self.results:
-                result.retro = [Estimate.zeros((RESULT_ROWS, sensor.retro_rings)) for _ in range(n_i)]
-                result.retro_projected_solid_angle = projected
+        n_i = plan.n_incidences
+        self.plan, self.estimators = plan, plan.build_estimators(sensor)
+        self.results = [Result(plan, sensor, value, self.estimators, {},
+                               [Estimate.zeros(len(ENERGY_NAMES) + 1) for _ in range(n_i)],
+                               np.zeros((n_i, len(COUNT_NAMES)), np.int64))
+                        for value in (plan.albedos or (None,))]
         self.order = {unit: k for k, unit in enumerate(plan.units)}
         self.pending = {}
         self.next = 0
@@ -241,20 +250,19 @@ class _Reducer:
 
     def _reduce(self, unit, tally) -> None:
         i = unit[1]
-        exit_weight, energy = per_albedo(tally.exit_weight, 2), per_albedo(tally.energy, 1)
+        energy = per_albedo(tally.energy, 1)
         for j, res in enumerate(self.results):
-            per_path = exit_weight[j] / tally.paths
-            bins = np.vstack([per_path[:ORDERS], per_path[:ORDERS].sum(axis=0), per_path[BASE_ROW],
-                              per_path[0] + per_path[1]])
-            cells, rings = bins[:, :res.sensor.n_cells], bins[:, res.sensor.n_cells:]
-            res.brdf[i].add(cells / res.sensor.projected_solid_angle())
-            if res.retro:
-                projected = res.retro_projected_solid_angle[i]
-                res.retro[i].add(np.divide(rings, projected, out=np.zeros_like(rings), where=projected > 0))
-            albedo = cells.sum(axis=1)
-            res.albedo[i].add(albedo)
+            exited = 0.0
+            for estimator, record in zip(self.estimators, tally.estimates):
+                fields = record._make(per_albedo(field[0], len(shape))[j]
+                                      for field, shape in zip(record, estimator.shapes()))
+                estimates = estimator.reduce(fields, tally.paths, i)
+                for name, value in estimates.items():
+                    res.estimates.setdefault(name, [Estimate.zeros(value.shape) for _ in self.plan.theta_i])
+                    res.estimates[name][i].add(value)
+                exited += estimator.exited(estimates)
             lost = energy[j] / tally.paths
-            res.energy[i].add(np.append(lost, albedo[RESULT_ALL_ORDERS] + lost.sum()))
+            res.energy[i].add(np.append(lost, exited + lost.sum()))
             res.counts[i] += tally.counts
 
     @property
@@ -278,7 +286,8 @@ def memory_estimate(plan: Plan, sensor: Sensor, workers: int, spawned: bool = Fa
     realization's scene (the generator's ``scene_bytes``), a batch of path rows or the chunk
     tallies of a wave, and its unit's tally; the main process sums into per-incidence estimates
     and buffers the tallies of units that arrive early (up to all but one worker's share)."""
-    tally = max(1, len(plan.albedos)) * TALLY_ROWS * sensor.tally_width * 8
+    tally = max(1, len(plan.albedos)) * sum(8 * math.prod(shape) for estimator in plan.build_estimators(sensor)
+                                            for shape in estimator.shapes())
     if plan.backend == "embreex":
         paths = min(plan.paths_per_realization, embreex.BATCH_PATHS) * PATH_ROW_BYTES
     else:
@@ -286,8 +295,8 @@ def memory_estimate(plan: Plan, sensor: Sensor, workers: int, spawned: bool = Fa
     tracing = plan.generator.scene_bytes(plan.scene) + paths + 2 * tally
     units = len(plan.units)
     processes = len(executors.split(plan.units, max(1, workers)))
-    reducing = (3 * max(1, len(plan.albedos)) * plan.n_incidences * RESULT_ROWS * sensor.tally_width * 8
-                 + units * tally * (processes - 1) // processes)
+    # per incidence, the sums and squares of the estimates (the binning's: 7 rows to its tally's 5)
+    reducing = 5 * plan.n_incidences * tally + units * tally * (processes - 1) // processes
     workers_bytes = (PROCESS_BYTES if spawned else WORKER_BYTES) * processes if processes > 1 or spawned else 0
     return PROCESS_BYTES + workers_bytes + tracing * processes + reducing
 
@@ -327,7 +336,8 @@ def compile_tracer(plan: Plan, sensor: Sensor | None = None) -> None:
     """Compile (or load from numba's cache) the kernels of the plan's tracer in this process:
     before worker processes fork (they inherit the machine code) or a local Dask cluster
     starts (its workers load it from the disk cache), and outside the time a run reports."""
-    plan.tracer_class.compile(sensor if sensor is not None else plan.build_sensor(), albedos=len(plan.albedo_scale),
+    sensor = sensor if sensor is not None else plan.build_sensor()
+    plan.tracer_class.compile(sensor, plan.build_estimators(sensor), len(plan.albedo_scale), plan.scene,
                               **plan.tracer_options)
     stream_key(plan.config.run.seed, 0, 0)  # each unit's random stream
 

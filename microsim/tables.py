@@ -48,9 +48,9 @@ import numpy as np
 
 from . import __version__
 from .frames import direction
-from .integrators.records import COUNT_NAMES, ENERGY_NAMES, ORDERS, RESULT_ALL_ORDERS, RESULT_ORDER1_BASE, \
-    RESULT_ORDERS12
+from .orders import ORDERS
 from .sensor import Sensor
+from .tally import COUNT_NAMES, ENERGY_NAMES
 
 
 def config_to_toml(config) -> str:
@@ -132,21 +132,8 @@ def write(path: str | Path, result, config, overwrite: bool = False) -> Path:
             _store(h5, "sensor/projected_solid_angle", sensor.projected_solid_angle())
             _store(h5, "sensor/ring_counts", sensor.ring_counts)
             h5["sensor"].attrs["cells_requested"] = plan.sensor_cells
-            if result.retro:
-                for name, bounds in zip(("retro_gamma_lo", "retro_gamma_hi"), sensor.retro_phase_bounds()):
-                    _store(h5, f"sensor/{name}", bounds)
-                _store(h5, "sensor/retro_projected_solid_angle", np.stack(result.retro_projected_solid_angle))
-                for suffix, row in (("", RESULT_ALL_ORDERS), ("_order", slice(0, ORDERS))):
-                    _store(h5, f"brdf_retro{suffix}", np.stack([e.mean[row] for e in result.retro]))
-                    _store(h5, f"brdf_retro{suffix}_stderr", np.stack([e.stderr[row] for e in result.retro]))
-            has_base = plan.scene.get("base", "none") != "none"
-            for name, estimates in (("brdf", result.brdf), ("albedo", result.albedo)):
-                rows = {"": RESULT_ALL_ORDERS, "_order": slice(0, ORDERS), "_orders12": RESULT_ORDERS12}
-                if has_base:
-                    rows["_order1_base"] = RESULT_ORDER1_BASE
-                for suffix, row in rows.items():
-                    _store(h5, name + suffix, np.stack([e.mean[row] for e in estimates]))
-                    _store(h5, f"{name}{suffix}_stderr", np.stack([e.stderr[row] for e in estimates]))
+            for estimator in result.estimators:
+                estimator.write(lambda name, data: _store(h5, name, data), result.estimates)
             for j, name in enumerate((*ENERGY_NAMES, "balance")):
                 _store(h5, f"energy/{name}", np.array([e.mean[j] for e in result.energy]))
                 _store(h5, f"energy/{name}_stderr", np.array([e.stderr[j] for e in result.energy]))

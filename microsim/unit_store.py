@@ -31,13 +31,13 @@ from pathlib import Path
 import numpy as np
 
 
-from . import __version__, kernel_cache
-from .integrators.records import Tally
+from . import __version__, estimators, kernel_cache
+from .tally import Tally
 
 MANIFEST = "manifest.json"
 SUFFIX = ".partial"
-#: the arrays of a unit file
-FIELDS = ("paths", "exit_weight", "energy", "counts", "albedo_scale", "info")
+#: the arrays of a unit file, besides the fields of each estimator (named "<estimator>.<field>")
+FIELDS = ("paths", "energy", "counts", "albedo_scale", "info")
 
 
 class StoreMismatch(ValueError):
@@ -59,6 +59,7 @@ def fingerprint(plan) -> dict:
     return {
         "config": plan.config.model_dump(mode="json", exclude_none=True),
         "backend": plan.backend,
+        "estimators": list(plan.estimator_names),
         "microsim_version": __version__,
         "sources": "".join(kernel_cache.package_stamp(root).hex() for root in kernel_cache.STAMP_SOURCES),
     }
@@ -72,10 +73,13 @@ class UnitStore:
     """The units saved for one run. :meth:`check` says whether a run may use the directory;
     :meth:`open` takes it (locked) for the run."""
 
-    def __init__(self, directory: Path, print_: dict):
+    def __init__(self, directory: Path, print_: dict, records: dict | None = None):
+        """``records``: the Record class of each estimator of the run, by name (microsim.estimators)."""
         self.directory = Path(directory)
         self.fingerprint = print_
         self.key = _digest(print_)
+        self.records = records or {}
+        self.fields = FIELDS + tuple(f"{name}.{field}" for name, record in self.records.items() for field in record._fields)
         self._lock = None
 
     @classmethod
@@ -85,7 +89,7 @@ class UnitStore:
         Without ``resume`` the directory must hold no finished unit (StoreMismatch: nothing is
         discarded unasked) unless ``force``; with it, its units must come from the same
         fingerprint (StoreMismatch naming what changed)."""
-        store = cls(directory, fingerprint(plan))
+        store = cls(directory, fingerprint(plan), {name: estimators.get(name).Record for name in plan.estimator_names})
         if not store.directory.exists() or (force and not resume):
             return store
         if not store.directory.is_dir():
@@ -140,7 +144,7 @@ class UnitStore:
         for path in self.directory.glob(f"r*_i*.{self.key[:16]}.npz"):
             try:
                 with zipfile.ZipFile(path) as archive:
-                    whole = {name.removesuffix(".npy") for name in archive.namelist()} == set(FIELDS) and \
+                    whole = {name.removesuffix(".npy") for name in archive.namelist()} == set(self.fields) and \
                         archive.testzip() is None
             except (OSError, zipfile.BadZipFile, EOFError, ValueError):
                 whole = False
@@ -167,9 +171,11 @@ class UnitStore:
         tmp = path.with_name(f".{path.name}.tmp")
         try:
             with open(tmp, "wb") as handle:
-                np.savez(handle, paths=np.int64(tally.paths), exit_weight=tally.exit_weight, energy=tally.energy,
-                         counts=tally.counts, albedo_scale=tally.albedo_scale,
-                         info=np.frombuffer(json.dumps(_plain(info)).encode(), np.uint8))
+                fields = {f"{name}.{field}": values for name, record in zip(self.records, tally.estimates)
+                          for field, values in record._asdict().items()}
+                np.savez(handle, paths=np.int64(tally.paths), energy=tally.energy, counts=tally.counts,
+                         albedo_scale=tally.albedo_scale, info=np.frombuffer(json.dumps(_plain(info)).encode(), np.uint8),
+                         **fields)
                 handle.flush()
                 os.fsync(handle.fileno())
             os.replace(tmp, path)
@@ -184,7 +190,9 @@ class UnitStore:
     def load(self, unit) -> tuple[Tally, dict]:
         """A saved unit's tally and scene info, as they were saved."""
         with np.load(self._unit_file(unit), allow_pickle=False) as data:
-            tally = Tally(int(data["paths"]), data["exit_weight"], data["energy"], data["counts"], data["albedo_scale"])
+            records = tuple(record._make(data[f"{name}.{field}"] for field in record._fields)
+                            for name, record in self.records.items())
+            tally = Tally(int(data["paths"]), 0, records, data["energy"], data["counts"], data["albedo_scale"])
             info = json.loads(data["info"].tobytes().decode())
         return tally, info
 

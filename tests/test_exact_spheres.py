@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from microsim import config, runner
-from microsim.integrators.records import RESULT_ALL_ORDERS
+from microsim.orders import RESULT_ALL_ORDERS
 from stat_bounds import chi2_bound
 
 REALIZATIONS = 16

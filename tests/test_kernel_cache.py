@@ -1,6 +1,7 @@
 """numba caches of microsim's kernels carry a stamp of every microsim source (microsim/kernel_cache.py)."""
 
 import os
+import pickle
 from pathlib import Path
 
 from numba.core import caching
@@ -30,7 +31,8 @@ def test_every_numba_locator_adds_the_package_stamp_for_microsim_files_only(tmp_
         return 0
 
     inside = in_tree.from_function(kernel, kernel_cache.__file__)
-    assert inside.get_source_stamp()[1:] == tuple(package_stamp(root) for root in kernel_cache.STAMP_SOURCES)
+    assert inside.get_source_stamp()[1:] == (*(package_stamp(root) for root in kernel_cache.STAMP_SOURCES),
+                                              kernel_cache.plugin_stamp())
     assert kernel_cache.STAMP_SOURCES[1].name == "geometry"
     outside_file = tmp_path / "elsewhere.py"
     outside_file.write_text("def kernel():\n    return 0\n")
@@ -98,3 +100,28 @@ def test_an_edit_of_a_generator_recompiles_the_kernels(tmp_path):
     plane = tmp_path / "geometry" / "plane.py"
     plane.write_text(plane.read_text() + "\nAN_EDITED_CONSTANT = 1\n")
     assert compiles()
+
+
+def test_a_plugin_registered_from_another_file_joins_the_stamp(tmp_path, monkeypatch):
+    """A hook or a material kind compiled into microsim's kernels from another module
+    (microsim.dispatch, microsim.materials): an edit of its file changes the stamp; microsim's
+    own files are stamped already and are not added."""
+    monkeypatch.setattr(kernel_cache, "PLUGIN_SOURCES", set())
+    kernel_cache.add_plugin_source(kernel_cache.__file__)
+    assert kernel_cache.plugin_stamp() == b""
+    plugin = tmp_path / "plugin.py"
+    plugin.write_text("X = 1\n")
+    kernel_cache.add_plugin_source(plugin)
+    first = kernel_cache.plugin_stamp()
+    plugin.write_text("X = 2\n")
+    assert kernel_cache.plugin_stamp() not in (first, b"")
+
+
+def test_an_index_that_names_a_module_this_process_cannot_import_is_a_stale_one():
+    """A kernel compiled with a plugin's record (its class in a module of its own) is listed in
+    numba's index by type: a process without that module recompiles instead of failing."""
+    from numba.core import caching
+
+    assert getattr(caching.IndexDataCacheFile._load_index, "tolerant", False)
+    unreadable = b"cno_such_plugin_module\nRecord\n."  # a pickle of a class of a missing module
+    assert kernel_cache._tolerant(lambda index: pickle.loads(unreadable))(None) == {}

@@ -33,7 +33,7 @@ def test_the_embreex_backend_traces_a_unit_in_batches_of_bounded_size(monkeypatc
     batched = tracer.trace(plan.incidence_direction(1), 5000, 7, 0)
     assert len(tracer.backend.paths.weight) == 1024  # rows held at once
     assert np.array_equal(whole.counts, batched.counts)  # the same paths: streams keyed by path number
-    assert np.allclose(whole.exit_weight, batched.exit_weight, rtol=1e-12, atol=0)
+    assert np.allclose(whole.estimates[0].weight, batched.estimates[0].weight, rtol=1e-12, atol=0)
     assert np.allclose(whole.energy, batched.energy, rtol=1e-12, atol=0)
 
 

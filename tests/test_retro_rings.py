@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from microsim import config, runner, tables
-from microsim.integrators.records import RESULT_ALL_ORDERS
+from microsim.orders import RESULT_ALL_ORDERS
 from microsim.models.radiative_transfer import single_scattering
 from microsim.sensor import Sensor, retro_ring
 from refusals import assert_run_refused, small_config

@@ -28,7 +28,7 @@ import geometry
 from microsim import config, executors, models, runner
 from microsim.compare import cell_averages
 from microsim.physics.fresnel import fresnel_array
-from microsim.integrators.records import SEGMENTS
+from microsim.tally import SEGMENTS
 from microsim.integrators.vcavity import VCavityTracer
 from microsim.physics import distributions as nd
 from microsim.physics.rng import path_state
@@ -304,7 +304,7 @@ def test_orders_1_and_2_give_f2_with_their_own_error_and_compare_reads_them(simu
     plan = runner.Plan.from_config(config.validate(settings))
     per_unit = {0: [], 1: []}
     executors.trace_units(plan, plan.units, lambda unit, tally, info: per_unit[unit[1]].append(
-        (tally.exit_weight[0] + tally.exit_weight[1]) / tally.paths / table.projected_solid_angle))
+        (tally.estimates[0].weight[0, 0] + tally.estimates[0].weight[0, 1]) / tally.paths / table.projected_solid_angle))
     for i, estimates in per_unit.items():
         spread = np.std(estimates, axis=0, ddof=1) / math.sqrt(len(estimates))
         assert np.allclose(a["brdf_orders12_stderr"][i], spread, rtol=1e-6, atol=1e-9 * spread.max())

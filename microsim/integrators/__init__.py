@@ -2,13 +2,15 @@
 ``INTEGRATOR``), and the runner looks it up here, so that it assumes neither triangles nor Embree.
 
 An integrator is a class built from one realization of a scene, the sensor and the run's
-options, ``Tracer(scene, sensor, backend=..., threads=...)``, with
-``trace(wi, n_paths, key, max_order, albedo_scale) -> records.Tally`` (the paths of one unit of
-work, on the random stream ``key``, tallied for every albedo of ``albedo_scale``; the tally must
-not depend on ``threads``) and a classmethod
-``compile(sensor, **options)`` that compiles its kernels before worker processes fork. The per-path records and the events
-every integrator shares (exit and binning, roulette, truncation) are in :mod:`.records` and
-:mod:`.events`.
+options, ``Tracer(scene, sensor, backend=..., threads=..., estimators=...)``, with
+``trace(wi, n_paths, key, max_order, albedo_scale) -> microsim.tally.Tally`` (the paths of one
+unit of work, on the random stream ``key``, tallied by the run's estimators for every albedo of
+``albedo_scale``; the tally must not depend on ``threads``) and a classmethod
+``compile(sensor, estimators, albedos, scene, backend, threads)`` that compiles the kernels of
+that run, and no other, before worker processes fork. Every integrator is a transport driven by
+one walk (:mod:`.walk`: the handling of each event, the path loop); the per-path records and the
+bookkeeping of an interaction (roulette, truncation) are in :mod:`.records` and :mod:`.events`,
+the scheduling of chunks on threads in :mod:`.scheduler`.
 """
 
 import importlib

@@ -18,8 +18,8 @@ import numba
 import numpy as np
 
 from .. import embree
-from .records import SEGMENTS
-from .scheduler import CHUNK_PATHS, SLOTS, chunk_tally, compile_tally_sums, trace_in_waves, wave_rows, workspace
+from ..tally import SEGMENTS
+from .scheduler import CHUNK_PATHS, SLOTS, chunk_tally, trace_in_waves, wave_rows, workspace
 from .surface_transport import follow, prepare_segment, start_path
 
 class DirectWorld(NamedTuple):
@@ -29,19 +29,18 @@ class DirectWorld(NamedTuple):
     handle: object
 
 
-def backend(scene, threads: int):
-    return DirectBackend(scene, threads)
+def backend(scene, threads: int, estimators):
+    return DirectBackend(scene, estimators, threads)
 
 
-def compile_kernels(beam, scene, sensor) -> None:
+def compile_kernels(beam, scene, sensor, estimators) -> None:
     """Compile (or load) :func:`trace_chunks` for these types, tracing nothing: no Embree call,
     no device. The library is loaded first: the kernel's machine code links to rtcIntersect1 by
     name (without it, loading the code segfaults)."""
     embree.available()
-    work = workspace(1, sensor.tally_width, albedos=len(beam.albedo_scale))
+    work = workspace(1, estimators, albedos=len(beam.albedo_scale))
     world = DirectWorld(scene.arrays(), embree.SceneHandle(0, np.zeros(1, np.int64), np.ones(2)))
     trace_chunks(0, 0, 0, beam, world, sensor, work)
-    compile_tally_sums(beam, work)
 
 
 class DirectBackend:
@@ -54,17 +53,17 @@ class DirectBackend:
 
     name = "direct"
 
-    def __init__(self, scene, threads: int = 1, log_rays: int = 0):
+    def __init__(self, scene, estimators, threads: int = 1, log_rays: int = 0):
         if log_rays and threads != 1:
             raise ValueError("the ray log keeps the order of one thread: give threads = 1")
         self.embree = embree.Scene(scene.vertices, scene.faces, scene.spheres, sphere_scale=scene.sphere_scale)
-        self.threads, self.log_rays = threads, log_rays
+        self.estimators, self.threads, self.log_rays = estimators, threads, log_rays
         self.ray_log = np.zeros((0, 7), np.float32)
 
     def trace(self, beam, scene, sensor):
-        work = workspace(wave_rows(beam.n_paths, self.threads), sensor.tally_width, self.log_rays, len(beam.albedo_scale))
+        work = workspace(wave_rows(beam.n_paths, self.threads), self.estimators, self.log_rays, len(beam.albedo_scale))
         world = DirectWorld(scene, self.embree.arrays())
-        total = trace_in_waves(beam, sensor.tally_width, self.threads, work,
+        total = trace_in_waves(beam, self.estimators, self.threads, work,
                                lambda *share: trace_chunks(*share, beam, world, sensor, work))
         self.ray_log = work.log[:min(work.logged[0], len(work.log))]
         return total

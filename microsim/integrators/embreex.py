@@ -18,23 +18,24 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from ..tally import SEGMENTS, empty_tally
 from .events import move_path
-from .records import SEGMENTS, allocate_paths, allocate_rays, empty_tally
+from .records import allocate_paths, allocate_rays
 from .surface_transport import follow, prepare_segment, start_path
 
 #: paths traced at once; their tallies are added batch after batch
 BATCH_PATHS = 1 << 20
 
 
-def backend(scene, threads: int):
+def backend(scene, threads: int, estimators):
     if threads != 1:
         raise ValueError("the embreex backend traces on one thread")
-    return EmbreexBackend(scene)
+    return EmbreexBackend(scene, estimators)
 
 
-def compile_kernels(beam, scene, sensor) -> None:
+def compile_kernels(beam, scene, sensor, estimators) -> None:
     """Compile (or load) spawn_paths and advance, with no embreex scene (nothing to hit)."""
-    EmbreexBackend(scene, embree=_NoHits()).trace(beam, scene.arrays(), sensor)
+    EmbreexBackend(scene, estimators, embree=_NoHits()).trace(beam, scene.arrays(), sensor)
 
 
 class EmbreexBackend:
@@ -42,20 +43,21 @@ class EmbreexBackend:
 
     name = "embreex"
 
-    def __init__(self, scene, embree=None):
+    def __init__(self, scene, estimators, embree=None):
         """``embree``: any object with embreex's ``run(origins, directions, dists, output=1)`` in
         place of the embreex scene of ``scene`` (the throughput benchmark records rays through it)."""
         if embree is None and len(scene.spheres):
             raise ValueError("native spheres need the direct Embree backend (backend = \"direct\"); "
                              "the embreex backend traces triangles only (give subdivisions or mesh_error)")
         self.embree = embree_scene(scene.vertices, scene.faces) if embree is None else embree
+        self.estimators = estimators
         self.paths, self.rays = allocate_paths(0), allocate_rays(0)
 
     def trace(self, beam, scene, sensor):
         rows = min(beam.n_paths, BATCH_PATHS)
         if len(self.paths.weight) < rows:
             self.paths, self.rays = allocate_paths(rows), allocate_rays(rows)
-        tally = empty_tally(beam.n_paths, sensor.tally_width, beam.albedo_scale)
+        tally = empty_tally(beam.n_paths, self.estimators, beam.albedo_scale)
         for first in range(0, beam.n_paths, BATCH_PATHS):
             self._trace_batch(first, min(BATCH_PATHS, beam.n_paths - first), beam, scene, sensor, tally)
         return tally

@@ -1,11 +1,9 @@
 """Per-path events that every integrator shares (numba kernels inlined into each tracer's loop).
 
 A path ``i`` is a row of a :class:`~microsim.integrators.records.Paths` bundle; the kernels
-update it and the batch's :class:`~microsim.integrators.records.Tally` in place:
+update it and the batch's :class:`~microsim.tally.Tally` in place:
 
 - :func:`begin_path`: a path's starting state;
-- :func:`exit_top`: the path leaves the surface; its weight is binned on the sensor, by order
-  (and order 1 scattered by the base plane apart);
 - :func:`cut_at_max_order`: before an interaction, a path that has had ``max_order`` of them
   is truncated;
 - :func:`interacted`: the bookkeeping of an interaction, the same whatever scattered the path (a
@@ -26,8 +24,7 @@ import numba
 from numba import literal_unroll
 
 from ..physics.rng import path_state, uniform
-from ..sensor import cell_index, retro_ring
-from .records import ABSORBED, BASE_ROW, ORDERS, ROULETTE_KILLS, TRUNCATED
+from ..tally import ABSORBED, ROULETTE_KILLS, TRUNCATED
 
 #: Russian roulette: a path whose weight falls below this survives with probability weight / ROULETTE_WEIGHT
 ROULETTE_WEIGHT = 0.05
@@ -50,33 +47,6 @@ def begin_path(paths, i, number, key):
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def exit_top(paths, i, d, sensor, tally):
-    """Path i leaves along d: its weight goes to d's sensor cell, in the row of its order (and in
-    BASE_ROW too if its one interaction was with the base plane); and likewise to d's retro ring,
-    if the sensor has retro rings and d falls in one (tally bins after the cells)."""
-    order = paths.order[i]
-    row, from_base = min(order, ORDERS) - 1, order == 1 and paths.from_base[i]
-    cell = cell_index(d, sensor)
-    add_exit(tally, row, cell, paths.weight[i], order)
-    if from_base:
-        add_exit(tally, BASE_ROW, cell, paths.weight[i], order)
-    if sensor.retro[4] > 0.0:
-        ring = retro_ring(d, sensor)
-        if ring >= 0:
-            slot = sensor.ring_start[-1] + ring
-            add_exit(tally, row, slot, paths.weight[i], order)
-            if from_base:
-                add_exit(tally, BASE_ROW, slot, paths.weight[i], order)
-
-
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def add_exit(tally, row, cell, w, order):
-    """Weight w of a path after ``order`` interactions into exit row ``row`` and ``cell``, for
-    every albedo of the tally (scaled by (c_j / c_max)^order, :class:`~.records.Tally`)."""
-    _add_exit(tally.exit_weight, tally.albedo_scale, row, cell, w, order)
-
-
-@numba.njit(cache=True, error_model="numpy", inline="always")
 def add_lost(tally, kind, w, order):
     """Weight w of a path after ``order`` interactions into the lost energy ``kind`` (an index of
     ENERGY_NAMES), for every albedo of the tally."""
@@ -87,26 +57,15 @@ def add_lost(tally, kind, w, order):
 def add_interaction(tally, w, order, factor, cut):
     """What a path of weight w after ``order`` interactions loses in one more: absorbed
     1 - factor - cut of it, truncated ``cut``; for albedo j the factor is factor c_j / c_max
-    (an interaction keeps c_max or nothing, see :class:`~.records.Tally`)."""
+    (an interaction keeps c_max or nothing, see :class:`~microsim.tally.Tally`)."""
     _add_interaction(tally.energy, tally.albedo_scale, w, order, factor, cut)
 
 
 @numba.njit(cache=True, error_model="numpy", _nrt=False)
-def _add_exit(exit_weight, scale, row, cell, w, order):
-    """exit_weight[row, cell] += w; with an albedo axis, exit_weight[j, row, cell] += w scale[j]^order
-    for each albedo j. A tally of one albedo has no albedo axis: numba compiles each rank apart and
-    resolves the branch on ndim at compile time (for an argument, not for a tuple's field), so one
-    albedo runs the code it ran before albedo lists. Not inlined by numba; LLVM inlines it."""
-    if exit_weight.ndim == 2:
-        exit_weight[row, cell] += w
-    else:
-        for j in range(len(scale)):
-            exit_weight[j, row, cell] += w * scale[j] ** order
-
-
-@numba.njit(cache=True, error_model="numpy", _nrt=False)
 def _add_lost(energy, scale, kind, w, order):
-    """:func:`add_lost` on the energy array (the ranks as in :func:`_add_exit`)."""
+    """:func:`add_lost` on the energy array: energy[kind] += w; with an albedo axis,
+    energy[j, kind] += w scale[j]^order for each albedo j. numba compiles each rank apart and
+    resolves the branch on ndim at compile time. Not inlined by numba; LLVM inlines it."""
     if energy.ndim == 1:
         energy[kind] += w
     else:
@@ -116,7 +75,7 @@ def _add_lost(energy, scale, kind, w, order):
 
 @numba.njit(cache=True, error_model="numpy", _nrt=False)
 def _add_interaction(energy, scale, w, order, factor, cut):
-    """:func:`add_interaction` on the energy array (the ranks as in :func:`_add_exit`)."""
+    """:func:`add_interaction` on the energy array (the ranks as in :func:`_add_lost`)."""
     if energy.ndim == 1:
         energy[ABSORBED] += w * (1.0 - factor - cut)
         energy[TRUNCATED] += w * cut

@@ -1,12 +1,11 @@
 """The medium tracer: paths through the radiative-transfer half space z < 0 (no triangles).
 
 A path enters at the surface along -wi and runs free flights of exponential length (unit mean
-free path, -ln(1 - xi)); a flight that would cross z = 0 leaves there and is binned on the
-sensor by order (:func:`~microsim.integrators.events.exit_top`); otherwise the path scatters:
-its weight is multiplied by the albedo c, and its new direction makes the cosine mu with the
+free path, -ln(1 - xi)); a flight that would cross z = 0 leaves there (the run's estimators
+see it); otherwise the path scatters: its weight is multiplied by the albedo c, and its new direction makes the cosine mu with the
 old one, mu drawn exactly from the phase function (:func:`scatter_direction`), the azimuth
-about the old direction uniform. Roulette, truncation, orders and tallies are those of every
-integrator (:mod:`.events`). Paths run to completion one at a time, in chunks on threads as
+about the old direction uniform. The walk, roulette, truncation, orders and tallies are those
+of every integrator (:mod:`.walk`). Paths run to completion one at a time, in chunks on threads as
 on the direct surface backend (:func:`microsim.integrators.scheduler.trace_in_waves`), so a table is
 bit-identical for any number of threads.
 """
@@ -22,16 +21,19 @@ import numpy as np
 from ..physics.phase import sample_cosine
 from ..physics.rng import uniform
 from ..physics.sampling import from_local
-from .events import begin_path, cut_at_max_order, exit_top, interacted
-from .records import SEGMENTS, SINGLE_ALBEDO, Beam
-from .scheduler import CHUNK_PATHS, chunk_tally, compile_tally_sums, trace_in_waves, wave_rows, workspace
+from ..estimators import DEFAULT, build
+from ..tally import SEGMENTS, SINGLE_ALBEDO
+from .events import begin_path
+from .records import Beam
+from .scheduler import trace_in_waves, wave_rows, workspace
+from .walk import EXIT, INTERACTION, trace_chunks
 
 class Medium(NamedTuple):
-    """What the medium kernels read: the phase function (its code in physics.phase.PHASES) and the albedo."""
+    """What the medium kernels trace (their world, :mod:`.walk`): the phase function (its code in
+    physics.phase.PHASES) and the albedo."""
 
     phase: int
     albedo: float
-
 
 
 class MediumTracer:
@@ -42,57 +44,60 @@ class MediumTracer:
     #: the progress line quotes it while it compiles)
     COMPILE_SECONDS = {"direct": 3, "embreex": 3}
 
-    def __init__(self, scene, sensor, backend: str = "direct", threads: int = 1):
+    def __init__(self, scene, sensor, backend: str = "direct", threads: int = 1, estimators=None):
         self.scene, self.sensor, self.threads = scene, sensor, threads
+        self.estimators = build(DEFAULT, sensor) if estimators is None else estimators
 
     def trace(self, wi, n_paths: int, key, max_order: int, albedo_scale=SINGLE_ALBEDO):
         """Trace ``n_paths`` paths arriving along -``wi`` on the random stream ``key``; see
         :meth:`microsim.integrators.surface.SurfaceTracer.trace`."""
         beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order, np.asarray(albedo_scale, np.float64))
         medium, sensor = self.scene.medium, self.sensor.toward(beam.wi)
-        work = workspace(wave_rows(n_paths, self.threads), sensor.tally_width, albedos=len(beam.albedo_scale))
-        return trace_in_waves(beam, sensor.tally_width, self.threads, work,
-                              lambda first, start, stop: trace_chunks(first, start, stop, beam, medium, sensor, work))
+        work = workspace(wave_rows(n_paths, self.threads), self.estimators, albedos=len(beam.albedo_scale))
+        return trace_in_waves(beam, self.estimators, self.threads, work,
+                              lambda *share: trace_medium_chunks(*share, beam, medium, sensor, work))
 
     @classmethod
-    def compile(cls, sensor, backend: str = "direct", threads: int = 1, albedos: int = 1) -> None:
+    def compile(cls, sensor, estimators=None, albedos: int = 1, scene=None, backend: str = "direct",
+                threads: int = 1) -> None:
         """Compile (or load) the kernel before workers fork, for runs of ``albedos`` albedos,
         tracing nothing."""
-        work = workspace(1, sensor.tally_width, albedos=albedos)
+        work = workspace(1, build(DEFAULT, sensor) if estimators is None else estimators, albedos=albedos)
         beam = Beam(np.array([0.0, 0.0, 1.0]), np.uint64(0), 0, 0, np.ones(albedos))
-        trace_chunks(0, 0, 0, beam, Medium(0, 0.5), sensor, work)
-        compile_tally_sums(beam, work)
+        trace_medium_chunks(0, 0, 0, beam, Medium(0, 0.5), sensor, work)
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def trace_chunks(first, start, stop, beam, medium, sensor, work):
-    """Chunks first+start .. first+stop-1 of the beam, chunk first+j into tally row j."""
-    for j in range(start, stop):
-        tally = chunk_tally(work, j, beam)
-        chunk = first + j
-        for number in range(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths)):
-            trace_path(work.paths, j, number, beam, medium, sensor, tally)
+def trace_medium_chunks(first, start, stop, beam, world, sensor, work):
+    """Chunks first+start .. first+stop-1 of the beam, chunk first+j into tally row j, by the walk
+    (:func:`microsim.integrators.walk.trace_chunks`)."""
+    trace_chunks((first, start, stop), beam, world, sensor, work, enter_medium, free_flight, scatter_in_medium)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def trace_path(paths, row, number, beam, medium, sensor, tally):
-    """Path ``number`` of the beam, in ``row``, from the surface until it leaves, is absorbed or
-    is truncated (module doc)."""
-    begin_path(paths, row, number, beam.key)
-    z = 0.0
-    d = (-beam.wi[0], -beam.wi[1], -beam.wi[2])
-    while True:
-        flight = -math.log1p(-uniform(paths.rng, row))
-        tally.counts[SEGMENTS] += 1
-        if d[2] > 0.0 and z + flight * d[2] >= 0.0:
-            exit_top(paths, row, d, sensor, tally)
-            return
-        if cut_at_max_order(paths, row, beam.max_order, tally):
-            return
-        z += flight * d[2]
-        d = scatter_direction(medium.phase, paths.rng, row, d)
-        if not interacted(paths, row, medium.albedo, 0.0, tally):
-            return
+def enter_medium(world, work, i, number, beam):
+    """Path ``number`` enters at the surface along -wi; its state is its depth z."""
+    begin_path(work.paths, i, number, beam.key)
+    return (-beam.wi[0], -beam.wi[1], -beam.wi[2]), 0.0
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def free_flight(world, work, i, path, tally):
+    """A free flight of exponential length: through z = 0 going up (EXIT), or to the next
+    scattering (INTERACTION)."""
+    d, z = path
+    flight = -math.log1p(-uniform(work.paths.rng, i))
+    tally.counts[SEGMENTS] += 1
+    if d[2] > 0.0 and z + flight * d[2] >= 0.0:
+        return EXIT, d, z
+    return INTERACTION, d, z + flight * d[2]
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def scatter_in_medium(world, paths, i, path):
+    """The phase function turns the path where it is; the albedo is the weight kept."""
+    d, z = path
+    return scatter_direction(world.phase, paths.rng, i, d), world.albedo, 0.0, z
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

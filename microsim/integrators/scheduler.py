@@ -5,7 +5,7 @@ into waves of up to ``WAVE_CHUNKS_PER_THREAD`` per thread. Each chunk is traced 
 into a tally of its own (a row of the :class:`Workspace`) by a kernel the integrator gives,
 ``trace_share(first, start, stop)``: ``threads`` Python threads share a wave, one numba call each
 for a contiguous share of its chunks (:func:`thread_shares`), the call releasing the GIL. The
-chunk tallies are then summed in chunk order (:func:`add_chunks`). A path's random stream is
+chunk tallies are then summed in chunk order (:func:`microsim.tally.add_rows`). A path's random stream is
 keyed by its number, and a chunk's order of events depends on its paths alone, so a table
 depends neither on the number of threads nor on which thread traced which chunk: bit-identical
 for any thread count.
@@ -25,7 +25,8 @@ import numba
 import numpy as np
 
 from .. import embree
-from .records import COUNT_NAMES, ENERGY_NAMES, TALLY_ROWS, Rays, Tally, allocate_paths, empty_tally
+from ..tally import COUNT_NAMES, ENERGY_NAMES, Tally, add_rows, empty_tally
+from .records import Rays, allocate_paths
 
 #: paths of one chunk: traced in order by one thread, into a tally of their own (module doc)
 CHUNK_PATHS = 8192
@@ -36,24 +37,22 @@ WAVE_CHUNKS_PER_THREAD = 4
 SLOTS = 2
 
 #: SLOTS rows per chunk of a wave (the paths it is tracing, their segments and Embree queries)
-#: and one row per chunk (its tally); and the ray log (origin, direction, tfar of every query,
-#: in order; empty unless asked for)
-Workspace = namedtuple("Workspace", ["paths", "rays", "records", "exit_weight", "energy", "counts", "log",
-                                     "logged"])
+#: and one row per chunk (its tally: the estimators' records, lost energy, counts); and the ray
+#: log (origin, direction, tfar of every query, in order; empty unless asked for)
+Workspace = namedtuple("Workspace", ["paths", "rays", "records", "estimates", "energy", "counts", "log", "logged"])
 
 
-def workspace(rows: int, width: int, log_rays: int = 0, albedos: int = 1) -> Workspace:
-    """Tallies of ``width`` bins (sensor.tally_width) for ``rows`` chunks (of ``albedos`` albedos
-    each), and SLOTS path rows (paths, queries) for each: two query records at least, as
-    the views into a single record would be contiguous, which numba types apart (a second
-    compile of every kernel)."""
+def workspace(rows: int, estimators, log_rays: int = 0, albedos: int = 1) -> Workspace:
+    """Tallies of ``estimators`` for ``rows`` chunks (of ``albedos`` albedos each), and SLOTS path
+    rows (paths, queries) for each: two query records at least, as the views into a single
+    record would be contiguous, which numba types apart (a second compile of every kernel)."""
     records = embree.ray_hits(SLOTS * rows)
     rays = Rays(*embree.ray_views(records), np.zeros(SLOTS * rows, np.int8))  # segments written into the queries
-    axis = (albedos,) if albedos > 1 else ()  # one albedo: no albedo axis (records.Tally)
+    axis = (albedos,) if albedos > 1 else ()  # one albedo: no albedo axis (microsim.tally.Tally)
     return Workspace(allocate_paths(SLOTS * rows), rays, records,
-                     np.zeros((rows, *axis, TALLY_ROWS, width)), np.zeros((rows, *axis, len(ENERGY_NAMES))),
-                     np.zeros((rows, len(COUNT_NAMES)), np.int64), np.zeros((log_rays, 7), np.float32),
-                     np.zeros(1, np.int64))
+                     tuple(estimator.allocate(rows, albedos) for estimator in estimators),
+                     np.zeros((rows, *axis, len(ENERGY_NAMES))), np.zeros((rows, len(COUNT_NAMES)), np.int64),
+                     np.zeros((log_rays, 7), np.float32), np.zeros(1, np.int64))
 
 
 def wave_rows(n_paths: int, threads: int) -> int:
@@ -61,23 +60,24 @@ def wave_rows(n_paths: int, threads: int) -> int:
     return min(WAVE_CHUNKS_PER_THREAD * threads, max(math.ceil(n_paths / CHUNK_PATHS), 1))
 
 
-def trace_in_waves(beam, width: int, threads: int, work: Workspace, trace_share):
+def trace_in_waves(beam, estimators, threads: int, work: Workspace, trace_share):
     """The tally of the beam's paths cut into chunks of CHUNK_PATHS, traced in waves of
     :func:`wave_rows` chunks on ``threads`` threads: ``trace_share(first, start, stop)`` traces
     chunks first+start .. first+stop-1 into the tally rows start .. stop-1 of ``work``, releasing
-    the GIL; each wave's rows are added in chunk order (:func:`add_chunks`)."""
+    the GIL; each wave's rows are added in chunk order (:func:`microsim.tally.add_rows`)."""
     n_chunks = math.ceil(beam.n_paths / CHUNK_PATHS)
     wave_chunks = WAVE_CHUNKS_PER_THREAD * threads
-    total = empty_tally(beam.n_paths, width, beam.albedo_scale)
+    total = empty_tally(beam.n_paths, estimators, beam.albedo_scale)
     with ThreadPoolExecutor(threads) as pool:
         for first in range(0, n_chunks, wave_chunks):
             count = min(wave_chunks, n_chunks - first)
+            clear_rows(work, count)
             shares = [(first, a, b) for a, b in thread_shares(first, count, beam.n_paths, threads) if b > a]
             if len(shares) == 1:
                 trace_share(*shares[0])  # one share: no hand-over to a pool thread
             else:
                 list(pool.map(lambda share: trace_share(*share), shares))
-            add_chunks(total, work, count)
+            add_rows(total, work.estimates, work.energy, work.counts, count)
     return total
 
 
@@ -90,46 +90,16 @@ def thread_shares(first: int, count: int, n_paths: int, threads: int) -> list[tu
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
 
 
+def clear_rows(work: Workspace, count: int) -> None:
+    """Zero the tallies of rows 0 .. count-1 of ``work``."""
+    for record in work.estimates:
+        for field in record:
+            field[:count] = 0.0
+    work.energy[:count] = 0.0
+    work.counts[:count] = 0
+
+
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def chunk_tally(work, j, beam):
-    """Tally row j of the workspace, zeroed: where chunk j of a wave adds its paths."""
-    tally = Tally(0, work.exit_weight[j], work.energy[j], work.counts[j], beam.albedo_scale)
-    tally.exit_weight[:] = 0.0
-    tally.energy[:] = 0.0
-    tally.counts[:] = 0
-    return tally
-
-
-@numba.njit(cache=True, error_model="numpy", _nrt=False)
-def add_chunks(total, work, count):
-    """Add the tallies of rows 0 .. count-1 to ``total``, in row (= chunk) order, whatever thread
-    traced which chunk."""
-    for j in range(count):
-        _add_row(total.exit_weight, work.exit_weight, j)
-        _add_row(total.energy, work.energy, j)
-        for k in range(work.counts.shape[1]):
-            total.counts[k] += work.counts[j, k]
-
-
-@numba.njit(cache=True, error_model="numpy", _nrt=False)
-def _add_row(total, rows, j):
-    """total += rows[j], elementwise, for the ranks a tally takes (records.Tally: one albedo has
-    no albedo axis; the rank of an argument is known when numba compiles)."""
-    if total.ndim == 1:
-        for a in range(total.shape[0]):
-            total[a] += rows[j, a]
-    elif total.ndim == 2:
-        for a in range(total.shape[0]):
-            for b in range(total.shape[1]):
-                total[a, b] += rows[j, a, b]
-    else:
-        for a in range(total.shape[0]):
-            for b in range(total.shape[1]):
-                for c in range(total.shape[2]):
-                    total[a, b, c] += rows[j, a, b, c]
-
-
-def compile_tally_sums(beam, work) -> None:
-    """Compile (or load) :func:`add_chunks` for the tallies of this beam and workspace, adding
-    nothing: :func:`trace_in_waves` calls it after a unit's first wave."""
-    add_chunks(empty_tally(0, work.exit_weight.shape[-1], beam.albedo_scale), work, 0)
+    """Tally row j of the workspace (zeroed by :func:`clear_rows`): where chunk j of a wave adds its paths."""
+    return Tally(0, j, work.estimates, work.energy[j], work.counts[j], beam.albedo_scale)

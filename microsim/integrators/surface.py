@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..estimators import DEFAULT, build
 from ..materials import Absorber
 from ..scene import Scene, SceneBuilder
+from ..tally import SINGLE_ALBEDO
 from . import direct, embreex
-from .records import SINGLE_ALBEDO, Beam
+from .records import Beam
 
 #: ``run.backend`` -> the module of that backend: ``backend(scene, threads)`` and ``compile_kernels``
 BACKENDS = {"direct": direct, "embreex": embreex}
@@ -35,10 +37,11 @@ class SurfaceTracer:
     #: the progress line quotes it while it compiles)
     COMPILE_SECONDS = {"direct": 20, "embreex": 7}
 
-    def __init__(self, scene: Scene, sensor, backend: str = "direct", threads: int = 1):
+    def __init__(self, scene: Scene, sensor, backend: str = "direct", threads: int = 1, estimators=None):
         self.scene, self.sensor = scene, sensor
         self.arrays = scene.arrays()
-        self.backend = backend_module(backend).backend(scene, threads)
+        estimators = build(DEFAULT, sensor) if estimators is None else estimators
+        self.backend = backend_module(backend).backend(scene, threads, estimators)
 
     def trace(self, wi, n_paths: int, key, max_order: int, albedo_scale=SINGLE_ALBEDO):
         """Trace ``n_paths`` paths arriving along -``wi``; return their :class:`~records.Tally`.
@@ -52,9 +55,12 @@ class SurfaceTracer:
         return self.backend.trace(beam, self.arrays, self.sensor.toward(beam.wi))
 
     @classmethod
-    def compile(cls, sensor, backend: str = "direct", threads: int = 1, albedos: int = 1) -> None:
+    def compile(cls, sensor, estimators=None, albedos: int = 1, scene=None, backend: str = "direct",
+                threads: int = 1) -> None:
         """Compile (or load from numba's cache) the kernels of ``backend`` in this process, for
-        runs of ``albedos`` albedos (one, or several: tallies of another shape, another kernel).
+        runs of ``albedos`` albedos (one, or several: tallies of another shape, another kernel)
+        and these ``estimators`` (None: the default ones; ``scene``, the run's resolved
+        parameters, changes nothing).
 
         Called before worker processes are forked, so that they inherit the machine code instead
         of each loading it again. Every scene has the same array types, so a small one will do;
@@ -63,7 +69,8 @@ class SurfaceTracer:
         builder = SceneBuilder(1.0)
         builder.add_base_plane(-0.5, Absorber(kind="absorber"))
         beam = Beam(np.array([0.0, 0.0, 1.0]), np.uint64(0), 1, 0, np.ones(albedos))
-        backend_module(backend).compile_kernels(beam, builder.build(1.0, -1.0, {}), sensor)
+        estimators = build(DEFAULT, sensor) if estimators is None else estimators
+        backend_module(backend).compile_kernels(beam, builder.build(1.0, -1.0, {}), sensor, estimators)
 
 
 def backend_module(name: str):

@@ -4,10 +4,11 @@ A path starts at a uniform point of the tile at ``z_top`` (:func:`start_path`). 
 stored in float32 as Embree takes it, with its distance ``tfar`` to the boundary of the tile's
 slab and which boundary that is (:func:`prepare_segment`). Embree finds the closest hit on it;
 :func:`follow` takes the path through the event there: a surface hit is projected onto the
-analytic shape (float64), scattered by its material, roulette'd and offset (:func:`interact`);
+analytic shape (float64), then :func:`~microsim.integrators.walk.take_event` scatters it by its
+material and offsets it (:func:`interact_on_shape`), and books it;
 a ray that meets a surface from behind passes through (:func:`pass_through`); a ray that reaches
 the tile side wraps to the opposite side (:func:`wrap_side`); one that reaches ``z_top`` leaves
-and is binned on the sensor by scattering order; one that reaches ``z_bottom`` is transmitted.
+(the run's estimators see it); one that reaches ``z_bottom`` is transmitted.
 These kernels are shared by the surface tracer's two backends (:mod:`.surface`), which differ
 only in how they call Embree and schedule paths: :mod:`.direct` and :mod:`.embreex`.
 
@@ -40,8 +41,9 @@ import numpy as np
 from ..materials import scatter
 from ..physics.rng import uniform
 from ..shapes import surface_point
-from .events import add_lost, begin_path, cut_at_max_order, exit_top, idled, interacted
-from .records import INSIDE_HITS, TRANSMITTED
+from ..tally import INSIDE_HITS
+from .events import begin_path
+from .walk import EXIT, IDLE, INTERACTION, TRANSMISSION, take_event
 
 #: segment ends: the tile side (wrap), the top (leave), the bottom (transmitted)
 SIDE_X, SIDE_Y, TOP, BOTTOM = 0, 1, 2, 3
@@ -66,54 +68,51 @@ def start_path(paths, rays, i, number, beam, scene):
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def follow(paths, rays, i, hit, scene, sensor, max_order, tally):
     """Path i traced the segment in row i of ``rays`` and met ``hit`` = (primitive or -1, its
-    distance t, Embree's float32 geometric normal); take it through the event there.
+    distance t, Embree's float32 geometric normal); take it through the event there
+    (:func:`microsim.integrators.walk.take_event`).
 
     Returns (alive, origin, direction) of its next segment: a surface hit scatters (or passes a
-    back face, or is truncated by ``max_order``); a miss leaves through the top (binned),
+    back face, or is truncated by ``max_order``); a miss leaves through the top (exit),
     the bottom (transmitted) or a tile side (wrapped).
     """
     o = (np.float64(rays.origin[i, 0]), np.float64(rays.origin[i, 1]), np.float64(rays.origin[i, 2]))
     d = (np.float64(rays.direction[i, 0]), np.float64(rays.direction[i, 1]), np.float64(rays.direction[i, 2]))
     p, t, ng = hit
+    kind, state = IDLE, (o, (0.0, 0.0, 0.0), -1)
     if p >= 0:
         h = (o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2])
         s = scene.prim_shape[p]
         facing = d[0] * ng[0] + d[1] * ng[1] + d[2] * ng[2]
         if facing >= 0.0:
             tally.counts[INSIDE_HITS] += 1
-            o = pass_through(h, d, facing, ng, scene.shape_size[s], scene.tile)
-            return not idled(paths, i, tally), o, d
-        if cut_at_max_order(paths, i, max_order, tally):
-            return False, o, d
-        return interact(paths, i, h, d, s, scene, tally)
-    end = rays.end[i]
-    if end == TOP:
-        exit_top(paths, i, d, sensor, tally)
-        return False, o, d
-    if end == BOTTOM:
-        add_lost(tally, TRANSMITTED, paths.weight[i], paths.order[i])
-        return False, o, d
-    o = wrap_side(o, d, t, end, scene.tile)
-    return not idled(paths, i, tally), o, d
+            state = (pass_through(h, d, facing, ng, scene.shape_size[s], scene.tile), state[1], -1)
+        else:
+            q, n = surface_point(scene.shape_code[s], scene.shape_params[s], h)
+            kind, state = INTERACTION, (q, n, s)
+    else:
+        end = rays.end[i]
+        if end == TOP:
+            kind = EXIT
+        elif end == BOTTOM:
+            kind = TRANSMISSION
+        else:
+            state = (wrap_side(o, d, t, end, scene.tile), state[1], -1)
+    alive, d, state = take_event(scene, paths, i, (kind, d, state), max_order, sensor, tally, interact_on_shape)
+    return alive, state[0], d
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def interact(paths, i, h, d, s, scene, tally):
-    """Path i meets shape s at h going along d: scatter it by the shape's material.
-
-    Returns (survives, origin of the next segment off the surface, new direction); the path's
-    weight and order are updated, absorbed and truncated weight tallied.
-    """
-    p, n = surface_point(scene.shape_code[s], scene.shape_params[s], h)
-    m = scene.shape_material[s]
-    d, factor, cut = scatter(scene.material_code[m], scene.material_params[m], paths.rng, i, d, n)
+def interact_on_shape(world, paths, i, path):
+    """The material of the shape met scatters the path about the shape's normal at the point (the
+    path's state: the point, the normal, the shape); the next segment starts off the surface,
+    the :func:`clearance` along its normal."""
+    d, (p, n, s) = path
+    m = world.shape_material[s]
+    wo, factor, cut = scatter(world.material_code[m], world.material_params[m], paths.rng, i, d, n)
     if paths.order[i] == 0:
-        paths.from_base[i] = m == scene.base_material
-    if not interacted(paths, i, factor, cut, tally):
-        return False, p, d
+        paths.from_base[i] = m == world.base_material
     paths.idle[i] = 0
-    offset = clearance(p, scene.shape_size[s])
-    return True, wrap_point(p, n, offset, scene.tile), d
+    return wo, factor, cut, (wrap_point(p, n, clearance(p, world.shape_size[s]), world.tile), n, s)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

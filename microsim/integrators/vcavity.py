@@ -8,9 +8,9 @@ facet, normal m = (sin theta_m u, cos theta_m)) and z = -h (1 - x) (the right on
 a direction d moves the path by (d.u, d_z) per unit of the ray parameter t, whatever its
 component along the axis. The region is convex, so a ray leaves it where it first crosses one
 of its three sides going outwards: a facet (an interaction, shaded with the exact facet normal;
-the hit is put on the facet line) or the aperture z = 0 (the path leaves and is binned on the
-sensor by order, :func:`~microsim.integrators.events.exit_top`). Materials, roulette, truncation
-and tallies are those of every integrator (:mod:`.events`, :func:`microsim.materials.scatter`).
+the hit is put on the facet line) or the aperture z = 0 (the path leaves, and the run's
+estimators see it). The walk, its bookkeeping and the materials are those of every integrator
+(:mod:`.walk`, :func:`microsim.materials.scatter`).
 
 Two ways to find that crossing (``intersector``), one path body:
 
@@ -38,12 +38,15 @@ import numba
 import numpy as np
 
 from .. import embree
+from ..estimators import DEFAULT, build
 from ..materials import scatter
 from ..physics.distributions import sample_slope
 from ..physics.rng import uniform
-from .events import begin_path, cut_at_max_order, exit_top, interacted, truncate
-from .records import SEGMENTS, SINGLE_ALBEDO, Beam
-from .scheduler import CHUNK_PATHS, chunk_tally, compile_tally_sums, trace_in_waves, wave_rows, workspace
+from ..tally import SEGMENTS, SINGLE_ALBEDO
+from .events import begin_path
+from .records import Beam
+from .scheduler import trace_in_waves, wave_rows, workspace
+from .walk import EXIT, INTERACTION, STOP, trace_chunks
 
 #: the canonical groove the Embree intersector traces: half-width 1 in x, depth 1, y in [-1, 1]
 #: (a ray's axial motion is dropped, so it never leaves y = 0); left facet (normal +x side) first
@@ -65,8 +68,13 @@ class Grooves(NamedTuple):
 
 
 class GrooveWorld(NamedTuple):
-    """What a path's meeting with its groove reads: the grooves' law, and the canonical groove's
-    Embree scene (0 for the analytic intersector)."""
+    """The world of the analytic intersector (:mod:`.walk`): the grooves' law."""
+
+    grooves: Grooves
+
+
+class EmbreeGrooveWorld(NamedTuple):
+    """The world of the Embree intersector: the grooves' law, and the canonical groove's Embree scene."""
 
     grooves: Grooves
     handle: object
@@ -91,10 +99,11 @@ class VCavityTracer:
     #: the progress line quotes it while it compiles)
     COMPILE_SECONDS = {"direct": 10, "embreex": 10}
 
-    def __init__(self, scene, sensor, backend: str = "direct", threads: int = 1, log_rays: int = 0):
+    def __init__(self, scene, sensor, backend: str = "direct", threads: int = 1, estimators=None, log_rays: int = 0):
         if log_rays and (threads != 1 or scene.intersector != "embree"):
             raise ValueError("the ray log keeps the Embree queries of one thread: give threads = 1 and the embree intersector")
         self.scene, self.sensor, self.threads, self.log_rays = scene, sensor, threads, log_rays
+        self.estimators = build(DEFAULT, sensor) if estimators is None else estimators
         self.embree = embree.Scene(CANONICAL_VERTICES, CANONICAL_FACES) if scene.intersector == "embree" else None
         self.ray_log = np.zeros((0, 7), np.float32)
 
@@ -103,101 +112,115 @@ class VCavityTracer:
         :meth:`microsim.integrators.surface.SurfaceTracer.trace`."""
         beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order, np.asarray(albedo_scale, np.float64))
         grooves, sensor = self.scene.grooves, self.sensor.toward(beam.wi)
-        work = workspace(wave_rows(n_paths, self.threads), sensor.tally_width, self.log_rays, len(beam.albedo_scale))
-        if self.embree is None:
-            world = GrooveWorld(grooves, 0)
-
-            def share(first, start, stop):
-                trace_chunks_analytic(first, start, stop, beam, world, sensor, work)
-        else:
-            world = GrooveWorld(grooves, self.embree.arrays())
-
-            def share(first, start, stop):
-                trace_chunks_embree(first, start, stop, beam, world, sensor, work)
-        total = trace_in_waves(beam, sensor.tally_width, self.threads, work, share)
+        work = workspace(wave_rows(n_paths, self.threads), self.estimators, self.log_rays, len(beam.albedo_scale))
+        world = GrooveWorld(grooves) if self.embree is None else EmbreeGrooveWorld(grooves, self.embree.arrays())
+        trace_share = trace_chunks_analytic if self.embree is None else trace_chunks_embree
+        total = trace_in_waves(beam, self.estimators, self.threads, work,
+                               lambda *share: trace_share(*share, beam, world, sensor, work))
         self.ray_log = work.log[:min(work.logged[0], len(work.log))]
         return total
 
     @classmethod
-    def compile(cls, sensor, backend: str = "direct", threads: int = 1, albedos: int = 1) -> None:
-        """Compile (or load) both kernels before workers fork, for runs of ``albedos`` albedos,
-        tracing nothing (the Embree one only where the library loads: its machine code links to
-        rtcIntersect1 by name)."""
+    def compile(cls, sensor, estimators=None, albedos: int = 1, scene=None, backend: str = "direct",
+                threads: int = 1) -> None:
+        """Compile (or load) the kernel of the intersector of ``scene`` (its resolved parameters;
+        None: both) before workers fork, for runs of ``albedos`` albedos, tracing nothing (the
+        Embree one only where the library loads: its machine code links to rtcIntersect1 by
+        name)."""
         beam = Beam(np.array([0.0, 0.0, 1.0]), np.uint64(0), 0, 0, np.ones(albedos))
         grooves = Grooves(0, 0.5, 0.5, 0, np.zeros(2))
-        work = workspace(1, sensor.tally_width, albedos=albedos)
-        trace_chunks_analytic(0, 0, 0, beam, GrooveWorld(grooves, 0), sensor, work)
-        compile_tally_sums(beam, work)
-        try:
-            embree.available()
-        except embree.EmbreeUnavailable:
-            return
-        handle = embree.SceneHandle(0, np.zeros(1, np.int64), np.ones(2))
-        trace_chunks_embree(0, 0, 0, beam, GrooveWorld(grooves, handle), sensor, work)
+        work = workspace(1, build(DEFAULT, sensor) if estimators is None else estimators, albedos=albedos)
+        intersector = None if scene is None else scene.get("intersector")
+        if intersector in (None, "analytic"):
+            trace_chunks_analytic(0, 0, 0, beam, GrooveWorld(grooves), sensor, work)
+        if intersector in (None, "embree"):
+            try:
+                embree.available()
+            except embree.EmbreeUnavailable:
+                return
+            handle = embree.SceneHandle(0, np.zeros(1, np.int64), np.ones(2))
+            trace_chunks_embree(0, 0, 0, beam, EmbreeGrooveWorld(grooves, handle), sensor, work)
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def trace_chunks_analytic(first, start, stop, beam, world, sensor, work):
-    """Chunks first+start .. first+stop-1 of the beam, chunk first+j into tally row j (:func:`meet_analytic`)."""
-    trace_chunks(first, start, stop, beam, world, sensor, work, meet_analytic)
+    """Chunks first+start .. first+stop-1 of the beam, chunk first+j into tally row j, by the walk
+    (:func:`microsim.integrators.walk.trace_chunks`) with :func:`meet_analytic`."""
+    trace_chunks((first, start, stop), beam, world, sensor, work, start_in_groove, next_event_analytic,
+                 interact_on_facet)
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def trace_chunks_embree(first, start, stop, beam, world, sensor, work):
-    """Chunks first+start .. first+stop-1 of the beam, chunk first+j into tally row j (:func:`meet_embree`)."""
-    trace_chunks(first, start, stop, beam, world, sensor, work, meet_embree)
+    """:func:`trace_chunks_analytic` with :func:`meet_embree`."""
+    trace_chunks((first, start, stop), beam, world, sensor, work, start_in_groove, next_event_embree,
+                 interact_on_facet)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def trace_chunks(first, start, stop, beam, world, sensor, work, meet):
-    for j in range(start, stop):
-        tally = chunk_tally(work, j, beam)
-        chunk = first + j
-        for number in range(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths)):
-            trace_path(work, j, number, beam, world, sensor, tally, meet)
-
-
-@numba.njit(cache=True, error_model="numpy", inline="always")
-def trace_path(work, row, number, beam, world, sensor, tally, meet):
-    """Path ``number`` of the beam, in ``row`` of the workspace, from its groove's aperture until
-    it leaves, is absorbed or is truncated (module doc)."""
+def start_in_groove(world, work, i, number, beam):
+    """Path ``number`` draws its groove's facet slope and enters the aperture at a uniform point
+    (module doc). The state: the point (x, z) of the cross-section, the facet it is on (NONE),
+    the facet's normal, and the groove's frame (cos and sin of the slope's azimuth, depth h,
+    cos and sin of the facet angle)."""
     paths, grooves = work.paths, world.grooves
-    begin_path(paths, row, number, beam.key)
-    sx, sy = sample_slope(grooves.distribution, grooves.roughness_x, grooves.roughness_y, paths.rng, row)
+    begin_path(paths, i, number, beam.key)
+    sx, sy = sample_slope(grooves.distribution, grooves.roughness_x, grooves.roughness_y, paths.rng, i)
     slope = math.sqrt(sx * sx + sy * sy)
     cu, su = (sx / slope, sy / slope) if slope > 0.0 else (1.0, 0.0)
     h = max(slope, MIN_DEPTH)
     cos_m = 1.0 / math.sqrt(1.0 + h * h)
     sin_m = h * cos_m
-    x, z = 2.0 * uniform(paths.rng, row) - 1.0, 0.0
-    d = (-beam.wi[0], -beam.wi[1], -beam.wi[2])
-    last = NONE
-    while True:
-        du = d[0] * cu + d[1] * su
-        dz = d[2]
-        facet, t = meet(world, work, row, (x, z), (du, dz), h, last)
-        tally.counts[SEGMENTS] += 1
-        if facet == NONE:
-            if dz > 0.0:
-                exit_top(paths, row, d, sensor, tally)
-            else:  # along the axis, level: it meets neither a facet nor the aperture
-                truncate(paths, row, tally)
-            return
-        if cut_at_max_order(paths, row, beam.max_order, tally):
-            return
-        x = x + t * du
-        if facet == LEFT:
-            x = min(max(x, -1.0), 0.0)
-            z = -h * (x + 1.0)
-            n = (sin_m * cu, sin_m * su, cos_m)
-        else:
-            x = min(max(x, 0.0), 1.0)
-            z = -h * (1.0 - x)
-            n = (-sin_m * cu, -sin_m * su, cos_m)
-        d, factor, cut = scatter(grooves.material_code, grooves.material_params, paths.rng, row, d, n)
-        if not interacted(paths, row, factor, cut, tally):
-            return
-        last = facet
+    x = 2.0 * uniform(paths.rng, i) - 1.0
+    return (-beam.wi[0], -beam.wi[1], -beam.wi[2]), ((x, 0.0), NONE, (0.0, 0.0, 1.0), (cu, su, h, cos_m, sin_m))
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def next_event_analytic(world, work, i, path, tally):
+    """The next facet or the aperture, by :func:`meet_analytic`."""
+    return groove_event(world, work, i, path, tally, meet_analytic)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def next_event_embree(world, work, i, path, tally):
+    """The next facet or the aperture, by :func:`meet_embree`."""
+    return groove_event(world, work, i, path, tally, meet_embree)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def groove_event(world, work, i, path, tally, meet):
+    """Where the path leaves the groove's cross-section (module doc): a facet (INTERACTION, the
+    point put on the facet line, the facet's normal), the aperture going up (EXIT), or nowhere
+    (STOP: along the axis, level)."""
+    d, state = path
+    (x, z), last, _, frame = state
+    cu, su, h, cos_m, sin_m = frame
+    du = d[0] * cu + d[1] * su
+    dz = d[2]
+    facet, t = meet(world, work, i, (x, z), (du, dz), h, last)
+    tally.counts[SEGMENTS] += 1
+    if facet == NONE:
+        return (EXIT if dz > 0.0 else STOP), d, state
+    x = x + t * du
+    if facet == LEFT:
+        x = min(max(x, -1.0), 0.0)
+        z = -h * (x + 1.0)
+        n = (sin_m * cu, sin_m * su, cos_m)
+    else:
+        x = min(max(x, 0.0), 1.0)
+        z = -h * (1.0 - x)
+        n = (-sin_m * cu, -sin_m * su, cos_m)
+    return INTERACTION, d, ((x, z), facet, n, frame)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def interact_on_facet(world, paths, i, path):
+    """The facets' material scatters the path about the facet's normal; the path leaves the facet
+    it is on (the state's facet: not a candidate for its next meeting)."""
+    d, state = path
+    grooves = world.grooves
+    wo, factor, cut = scatter(grooves.material_code, grooves.material_params, paths.rng, i, d, state[2])
+    return wo, factor, cut, state
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

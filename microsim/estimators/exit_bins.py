@@ -1,0 +1,116 @@
+"""The exit binning: every path that leaves adds its weight to the sensor cell it leaves through.
+
+The estimator of CONVENTIONS 2: a beam of unit irradiance, N paths; a path leaving along d
+with weight w adds w / (N x the projected solid angle of d's cell) to the cell average of the
+BRDF, by scattering order (1, 2, 3, 4+), all orders, order 1 scattered by the base plane
+(CONVENTIONS 6, ``brdf_order1_base``) and orders 1 and 2 together (``brdf_orders12``); and, if the
+sensor has retro rings, the same in the ring about the retro direction that d falls in (a
+path may count in a cell and a ring). The albedos are the sums over the cells.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from ..orders import ORDERS, RESULT_ALL_ORDERS, RESULT_ORDER1_BASE, RESULT_ORDERS12
+from ..sensor import cell_index, retro_ring
+from . import Estimator
+from .hooks import ON_EXIT
+
+#: the row of the tally after the orders: order-1 exits scattered by the base plane
+BASE_ROW = ORDERS
+TALLY_ROWS = ORDERS + 1
+
+
+class ExitBinsTally(NamedTuple):
+    """Exit weights (rows: the orders, then order 1 from the base; columns: the sensor's cells,
+    then its retro rings, ``Sensor.tally_width``)."""
+
+    weight: np.ndarray
+
+
+class ExitBins(Estimator):
+    """The exit binning (module doc): datasets brdf*, albedo*, brdf_retro* (CONVENTIONS 6)."""
+
+    name = "exit_bins"
+    Record = ExitBinsTally
+
+    def shapes(self):
+        return ((TALLY_ROWS, self.sensor.tally_width),)
+
+    def reduce(self, fields, paths, incidence):
+        per_path = fields.weight / paths
+        bins = np.vstack([per_path[:ORDERS], per_path[:ORDERS].sum(axis=0), per_path[BASE_ROW],
+                          per_path[0] + per_path[1]])
+        cells, rings = bins[:, :self.sensor.n_cells], bins[:, self.sensor.n_cells:]
+        estimates = {"brdf": cells / self.sensor.projected_solid_angle(), "albedo": cells.sum(axis=1)}
+        if self.sensor.retro_rings:
+            projected = self.retro_projected_solid_angle[incidence]
+            estimates["brdf_retro"] = np.divide(rings, projected, out=np.zeros_like(rings), where=projected > 0)
+        return estimates
+
+    def exited(self, estimates):
+        return estimates["albedo"][RESULT_ALL_ORDERS]
+
+    @property
+    def retro_projected_solid_angle(self) -> list[np.ndarray]:
+        """Per incidence of the run, the projected solid angles of the retro rings about it."""
+        if not hasattr(self, "_retro_projected"):
+            self._retro_projected = [self.sensor.retro_projected_solid_angle(self.plan.incidence_direction(i))
+                                     for i in range(self.plan.n_incidences)]
+        return self._retro_projected
+
+    def write(self, put, estimates):
+        if self.sensor.retro_rings:
+            for name, bounds in zip(("retro_gamma_lo", "retro_gamma_hi"), self.sensor.retro_phase_bounds()):
+                put(f"sensor/{name}", bounds)
+            put("sensor/retro_projected_solid_angle", np.stack(self.retro_projected_solid_angle))
+            for suffix, row in (("", RESULT_ALL_ORDERS), ("_order", slice(0, ORDERS))):
+                put(f"brdf_retro{suffix}", np.stack([e.mean[row] for e in estimates["brdf_retro"]]))
+                put(f"brdf_retro{suffix}_stderr", np.stack([e.stderr[row] for e in estimates["brdf_retro"]]))
+        rows = {"": RESULT_ALL_ORDERS, "_order": slice(0, ORDERS), "_orders12": RESULT_ORDERS12}
+        if self.plan.scene.get("base", "none") != "none":
+            rows["_order1_base"] = RESULT_ORDER1_BASE
+        for name in ("brdf", "albedo"):
+            for suffix, row in rows.items():
+                put(name + suffix, np.stack([e.mean[row] for e in estimates[name]]))
+                put(f"{name}{suffix}_stderr", np.stack([e.stderr[row] for e in estimates[name]]))
+
+
+@ON_EXIT.register(ExitBinsTally)
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def on_exit(record, tally, paths, i, d, sensor):
+    """Path i leaves along d: its weight goes to d's sensor cell, in the row of its order (and in
+    BASE_ROW too if its one interaction was with the base plane); and likewise to d's retro ring,
+    if the sensor has retro rings and d falls in one (bins after the cells)."""
+    order = paths.order[i]
+    row, from_base = min(order, ORDERS) - 1, order == 1 and paths.from_base[i]
+    weight = record.weight[tally.row]
+    cell = cell_index(d, sensor)
+    add_exit(weight, tally.albedo_scale, (row, cell), paths.weight[i], order)
+    if from_base:
+        add_exit(weight, tally.albedo_scale, (BASE_ROW, cell), paths.weight[i], order)
+    if sensor.retro[4] > 0.0:
+        ring = retro_ring(d, sensor)
+        if ring >= 0:
+            slot = sensor.ring_start[-1] + ring
+            add_exit(weight, tally.albedo_scale, (row, slot), paths.weight[i], order)
+            if from_base:
+                add_exit(weight, tally.albedo_scale, (BASE_ROW, slot), paths.weight[i], order)
+
+
+@numba.njit(cache=True, error_model="numpy", _nrt=False)
+def add_exit(weight, scale, bin_, w, order):
+    """weight[row, cell] += w for ``bin_`` = (row, cell); with an albedo axis,
+    weight[j, row, cell] += w scale[j]^order for each albedo j (:class:`microsim.tally.Tally`).
+    numba compiles each rank apart and resolves the branch on ndim at compile time, so one
+    albedo runs the code it ran before albedo lists. Not inlined by numba; LLVM inlines it."""
+    row, cell = bin_
+    if weight.ndim == 2:
+        weight[row, cell] += w
+    else:
+        for j in range(len(scale)):
+            weight[j, row, cell] += w * scale[j] ** order

@@ -1,0 +1,46 @@
+"""The estimators' kernel hooks, called by the walk of every integrator for every estimator of a run.
+
+Each estimator registers its implementations on its ``Record`` class (:class:`microsim.dispatch.Generic`);
+a hook it does not register does nothing and compiles to nothing. The walk calls
+:func:`each_exit` and :func:`each_interaction` on the tuple of the run's records; they call the
+hook of each record in turn (unrolled when the kernel compiles).
+"""
+
+from __future__ import annotations
+
+from ..dispatch import Generic, over_each
+
+
+def on_exit(record, tally, paths, i, d, sensor):
+    """Path i of ``paths`` leaves the surface along d (unit, float64): add what it brings to
+    ``record`` (row ``tally.row``; albedo scales ``tally.albedo_scale``)."""
+
+
+def on_interaction(record, tally, paths, i, world, site):
+    """Path i of ``paths`` is about to interact, with its weight and order before the interaction:
+    ``site`` = (d, state), the direction it arrived along and its integrator's state at the event
+    (:mod:`microsim.integrators.walk`); ``world`` is what its integrator traces."""
+
+
+def _nothing(record, tally, paths, i, d, sensor):
+    pass
+
+
+def _nothing_on_interaction(record, tally, paths, i, world, site):
+    pass
+
+
+ON_EXIT = Generic(on_exit, default=_nothing)
+ON_INTERACTION = Generic(on_interaction, default=_nothing_on_interaction)
+
+
+def each_exit(records, tally, paths, i, d, sensor):
+    """:func:`on_exit` of every record of the tuple ``records``."""
+
+
+def each_interaction(records, tally, paths, i, world, site):
+    """:func:`on_interaction` of every record of the tuple ``records``."""
+
+
+over_each(each_exit, on_exit)
+over_each(each_interaction, on_interaction)
