@@ -8,7 +8,8 @@ unit of work, on the random stream ``key``, tallied by the run's estimators for 
 ``albedo_scale``; the tally must not depend on ``threads``) and a classmethod
 ``compile(sensor, estimators, albedos, scene, backend, threads)`` that compiles the kernels of
 that run, and no other, before worker processes fork. Every integrator is a transport driven by
-one walk (:mod:`.walk`: the handling of each event, the path loop); the per-path records and the
+one walk (:mod:`.walk`: the handling of each event, the path loop), with a visibility query
+registered on its world (:data:`.walk.VISIBILITY`); the per-path records and the
 bookkeeping of an interaction (roulette, truncation) are in :mod:`.records` and :mod:`.events`,
 the scheduling of chunks on threads in :mod:`.scheduler`.
 """

@@ -20,7 +20,9 @@ import numpy as np
 from .. import embree
 from ..tally import SEGMENTS
 from .scheduler import CHUNK_PATHS, SLOTS, chunk_tally, trace_in_waves, wave_rows, workspace
-from .surface_transport import follow, prepare_segment, start_path
+from .events import MAX_IDLE_SEGMENTS
+from .surface_transport import TOP, clearance, follow, prepare_segment, start_path, wrap_point, wrap_side
+from .walk import VISIBILITY
 
 class DirectWorld(NamedTuple):
     """What the direct backend's kernels trace: the scene's arrays, and its committed Embree scene."""
@@ -140,3 +142,28 @@ def query(handle, work, j):
                 work.log[k, 3 + axis] = rays.direction[j, axis]
             work.log[k, 6] = rays.tfar[j]
     embree.trace(handle.handle, work.records, j)
+
+
+@VISIBILITY.register(DirectWorld)
+@numba.njit(cache=True, error_model="numpy", _nrt=False)
+def visible_through_tile(world, work, i, state, wo):
+    """1 if the ray from the surface point of ``state`` = (point, normal, shape), lifted off the
+    surface as a scattered ray is (the clearance along the normal), reaches z_top along wo without
+    meeting anything, wrapping at the tile's sides as often as it takes (Embree's occluded query
+    on each piece); 0 if it is blocked, or wo goes below the surface's tangent plane or down."""
+    scene, handle = world
+    p, n, s = state
+    if wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2] <= 0.0 or wo[2] <= 0.0:
+        return 0.0
+    rays = work.rays
+    o = wrap_point(p, n, clearance(p, scene.shape_size[s]), scene.tile)
+    for _ in range(MAX_IDLE_SEGMENTS):
+        prepare_segment(rays, i, o, wo, scene)
+        end, t = rays.end[i], np.float64(rays.tfar[i])
+        if embree.is_occluded(handle.handle, work.records, i):
+            return 0.0
+        if end == TOP:
+            return 1.0
+        o = (np.float64(rays.origin[i, 0]), np.float64(rays.origin[i, 1]), np.float64(rays.origin[i, 2]))
+        o = wrap_side(o, wo, t, end, scene.tile)
+    return 0.0

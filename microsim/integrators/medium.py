@@ -26,7 +26,7 @@ from ..tally import SEGMENTS, SINGLE_ALBEDO
 from .events import begin_path
 from .records import Beam
 from .scheduler import trace_in_waves, wave_rows, workspace
-from .walk import EXIT, INTERACTION, trace_chunks
+from .walk import EXIT, INTERACTION, VISIBILITY, trace_chunks
 
 class Medium(NamedTuple):
     """What the medium kernels trace (their world, :mod:`.walk`): the phase function (its code in
@@ -98,6 +98,14 @@ def scatter_in_medium(world, paths, i, path):
     """The phase function turns the path where it is; the albedo is the weight kept."""
     d, z = path
     return scatter_direction(world.phase, paths.rng, i, d), world.albedo, 0.0, z
+
+
+@VISIBILITY.register(Medium)
+@numba.njit(cache=True, error_model="numpy", _nrt=False)
+def transmittance(world, work, i, state, wo):
+    """exp(-tau) from depth ``state`` = z (<= 0, in mean free paths) to the surface along wo: the
+    optical path -z / wo_z; 0 for wo going down or level."""
+    return math.exp(state / wo[2]) if wo[2] > 0.0 else 0.0
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

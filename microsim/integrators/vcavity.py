@@ -46,7 +46,7 @@ from ..tally import SEGMENTS, SINGLE_ALBEDO
 from .events import begin_path
 from .records import Beam
 from .scheduler import trace_in_waves, wave_rows, workspace
-from .walk import EXIT, INTERACTION, STOP, trace_chunks
+from .walk import EXIT, INTERACTION, STOP, VISIBILITY, trace_chunks
 
 #: the canonical groove the Embree intersector traces: half-width 1 in x, depth 1, y in [-1, 1]
 #: (a ray's axial motion is dropped, so it never leaves y = 0); left facet (normal +x side) first
@@ -221,6 +221,31 @@ def interact_on_facet(world, paths, i, path):
     grooves = world.grooves
     wo, factor, cut = scatter(grooves.material_code, grooves.material_params, paths.rng, i, d, state[2])
     return wo, factor, cut, state
+
+
+@VISIBILITY.register(GrooveWorld)
+@numba.njit(cache=True, error_model="numpy", _nrt=False)
+def visible_in_groove_analytic(world, work, i, state, wo):
+    """:func:`groove_visibility` by :func:`meet_analytic`."""
+    return groove_visibility(world, work, i, state, wo, meet_analytic)
+
+
+@VISIBILITY.register(EmbreeGrooveWorld)
+@numba.njit(cache=True, error_model="numpy", _nrt=False)
+def visible_in_groove_embree(world, work, i, state, wo):
+    """:func:`groove_visibility` by :func:`meet_embree`."""
+    return groove_visibility(world, work, i, state, wo, meet_embree)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def groove_visibility(world, work, i, state, wo, meet):
+    """1 if the ray from the facet point of ``state`` along wo leaves the groove through its
+    aperture (meeting neither facet), 0 if it meets the other facet or goes below the facet."""
+    (x, z), facet, n, (cu, su, h, _, _) = state
+    if wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2] <= 0.0 or wo[2] <= 0.0:
+        return 0.0
+    met, _ = meet(world, work, i, (x, z), (wo[0] * cu + wo[1] * su, wo[2]), h, facet)
+    return 1.0 if met == NONE else 0.0
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

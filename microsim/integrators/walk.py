@@ -14,7 +14,14 @@ tuple of one type).
   ``tally.counts[SEGMENTS]``; kind is one of INTERACTION, EXIT, TRANSMISSION, STOP, IDLE;
 - ``interact(world, paths, i, path) -> (d, factor, cut, state)``: the interaction there: the new
   direction, the weight factor kept and the fraction cut (as :func:`microsim.materials.scatter`
-  returns them), and the state the path leaves with (off the surface, ...).
+  returns them), and the state the path leaves with (off the surface, ...);
+
+and, registered on its world's class (:data:`VISIBILITY`), the visibility query
+``visibility(world, work, i, state, wo)``: the transmittance from the point of an interaction
+(the path's state there) along wo to above the surface (Embree's occluded query through the
+periodic tile, the analytic groove, exp(-tau) in the medium), what next-event estimation weighs
+a point estimate by; it is called rarely and by estimators, so it is dispatched by the world's
+type (:mod:`microsim.dispatch`).
 
 :func:`take_event` then does, once for every integrator, what an event means: an exit goes to
 every estimator (:func:`microsim.estimators.hooks.each_exit`); transmission and truncation are
@@ -40,6 +47,7 @@ from __future__ import annotations
 
 import numba
 
+from ..dispatch import Generic
 from ..estimators.hooks import each_exit, each_interaction
 from ..tally import TRANSMITTED
 from .events import add_lost, cut_at_max_order, idled, interacted, truncate
@@ -49,6 +57,15 @@ from .scheduler import CHUNK_PATHS, chunk_tally
 #: leaves through the bottom; is stopped where it can go nowhere (truncated); or went a segment
 #: without an interaction (a tile side crossed, a face passed through)
 INTERACTION, EXIT, TRANSMISSION, STOP, IDLE = 0, 1, 2, 3, 4
+
+
+def visibility(world, work, i, state, wo):
+    """The transmittance from the interaction at ``state`` (the state of row i's path there) along
+    the unit direction wo out of the surface: 1 or 0 (unoccluded or not) on a surface, exp(-tau)
+    in a medium; 0 for wo below the surface at the point. Row i of ``work`` holds the query."""
+
+
+VISIBILITY = Generic(visibility)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
