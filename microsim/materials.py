@@ -115,10 +115,10 @@ class Material(Section):
         raise NotImplementedError
 
     @staticmethod
-    def lobes(prm, albedo, wi, wo, n):
-        """f(wi, wo) |n . wo| of the lobes that are not a delta, with the diffuse albedo ``albedo``
-        in place of the row's (1 for :func:`pdf`), for wi and wo both above the surface; a kind
-        of delta lobes only keeps this 0."""
+    def lobes(prm, white, wi, wo, n):
+        """f(wi, wo) |n . wo| of the lobes that are not a delta, for wi and wo both above the
+        surface; with ``white``, of the kind whose diffuse albedo is 1 (what its sampler draws
+        directions by: :func:`pdf`). A kind of delta lobes only keeps this 0."""
         return 0.0
 
 
@@ -196,8 +196,8 @@ class Lambert(Material):
         return sample_cosine(states, i, n), prm[0], 0.0
 
     @staticmethod
-    def lobes(prm, albedo, wi, wo, n):
-        return albedo * (wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2]) / math.pi
+    def lobes(prm, white, wi, wo, n):
+        return (1.0 if white else prm[0]) * (wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2]) / math.pi
 
 
 LAMBERT = Lambert.code
@@ -257,10 +257,10 @@ class InterfacedLambert(Material):
         return _interfaced_lambert(prm[0], prm[1], states, i, d, n)
 
     @staticmethod
-    def lobes(prm, albedo, wi, wo, n):
+    def lobes(prm, white, wi, wo, n):
         cos_i = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
         cos_o = wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2]
-        return _interfaced_lambert_body(albedo, prm[1], prm[2], cos_i, cos_o) * cos_o
+        return _interfaced_lambert_body(1.0 if white else prm[0], prm[1], prm[2], cos_i, cos_o) * cos_o
 
 
 INTERFACED_LAMBERT = InterfacedLambert.code
@@ -295,7 +295,7 @@ def scatter(code, prm, states, i, d, n):
 @numba.njit(cache=True, error_model="numpy", _nrt=False, inline="always")
 def evaluate(code, prm, wi, wo, n):
     """f(wi, wo) |n . wo| of the material's lobes that are not a Dirac delta (module doc)."""
-    return _continuous_lobes(code, prm, prm[0], wi, wo, n)
+    return _continuous_lobes(code, prm, False, wi, wo, n)
 
 
 @numba.njit(cache=True, error_model="numpy", _nrt=False, inline="always")
@@ -303,18 +303,18 @@ def pdf(code, prm, wi, wo, n):
     """Density per solid angle with which :func:`scatter` draws wo outside its delta lobes: the
     sampler draws directions as the white material would send them (the albedo goes into the
     weight), so the pdf is :func:`evaluate` of the kind with albedo 1."""
-    return _continuous_lobes(code, prm, 1.0, wi, wo, n)
+    return _continuous_lobes(code, prm, True, wi, wo, n)
 
 
 @numba.njit(cache=True, error_model="numpy", _nrt=False, inline="always")
-def _continuous_lobes(code, prm, albedo, wi, wo, n):
-    """f |n . wo| of the lobes that are not a delta, with the diffuse kinds' albedo ``albedo``:
-    0 unless wi and wo are both above the surface, else the kind's ``lobes``."""
+def _continuous_lobes(code, prm, white, wi, wo, n):
+    """f |n . wo| of the lobes that are not a delta (of the white kind, with ``white``): 0 unless
+    wi and wo are both above the surface, else the kind's ``lobes``."""
     cos_i = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
     cos_o = wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2]
     if cos_i <= 0.0 or cos_o <= 0.0:
         return 0.0
-    return lobes_of_kind(code, prm, albedo, wi, wo, n)
+    return lobes_of_kind(code, prm, white, wi, wo, n)
 
 
 def _switch(method: str, arguments: str):
@@ -369,4 +369,4 @@ def _interfaced_lambert(albedo, eta, states, i, d, n):
 
 #: the kernels' switches over every kind above (:func:`_switch`); a kind defined later is refused
 sample_of_kind = _switch("sample", "prm, states, i, d, n")
-lobes_of_kind = _switch("lobes", "prm, albedo, wi, wo, n")
+lobes_of_kind = _switch("lobes", "prm, white, wi, wo, n")
