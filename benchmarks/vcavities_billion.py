@@ -72,7 +72,7 @@ def settings(paths: int, intersector: str = "analytic") -> dict:
 
 
 def tracer(intersector: str, sensor, log_rays: int = 0) -> VCavityTracer:
-    cfg = config.validate(settings(1, intersector))
+    cfg = config.validate(settings(64, intersector))  # only resolves the scene: a run refuses fewer paths than realizations
     generator = geometry.SCENES["vcavities"]
     scene = generator.generate(generator.resolve(cfg), cfg, None)
     return VCavityTracer(scene, sensor, threads=1, log_rays=log_rays)

@@ -43,10 +43,11 @@ class Generic:
         overload(stub, jit_options=JIT_OPTIONS)(select)
 
     def register(self, record_class):
-        """Decorator: the implementation for records of ``record_class``."""
+        """Decorator: the implementation for records of ``record_class``, a Python function in
+        numba's subset (numba compiles it for each call's types, with JIT_OPTIONS)."""
         def add(implementation):
             self.implementations[record_class] = implementation
-            if self.in_microsim:  # compiled into microsim's kernels: their cache stamp covers it
+            if self.in_microsim:  # a hook of microsim's kernels: an edit of its file recompiles them
                 kernel_cache.add_plugin_source(inspect.getfile(getattr(implementation, "py_func", implementation)))
             return implementation
         return add

@@ -25,8 +25,8 @@ PACKAGE = Path(__file__).resolve().parent
 STAMP_SOURCES = (PACKAGE, PACKAGE.parent / "geometry")
 #: files whose kernels get the package stamp: the package, and the checkout's callers of it
 STAMPED = (PACKAGE, PACKAGE.parent / "benchmarks", PACKAGE.parent / "tests")
-#: files outside STAMP_SOURCES that hold kernels compiled into microsim's (a hook, a transport or
-#: a material kind registered from another module: :func:`add_plugin_source`)
+#: files outside STAMP_SOURCES that hold kernels compiled into microsim's (an estimator's hook
+#: registered from another module: :func:`add_plugin_source`)
 PLUGIN_SOURCES: set[Path] = set()
 
 
@@ -73,14 +73,20 @@ def plugin_stamp() -> bytes:
     return _digest(Path("/"), files)
 
 
+class Stamp(tuple):
+    """The stamp of a stamped kernel: its file's, the packages', and the plugins' last (numba
+    reads a locator's stamp once, when a kernel is defined, before plugins register: the plugins'
+    part is brought up to date whenever the cache index is read or written, :func:`install`)."""
+
+
 class PackageStamped:
-    """Mixin of a numba cache locator: adds the package stamp to the stamp of a stamped file."""
+    """Mixin of a numba cache locator: adds the package and plugin stamps to the stamp of a stamped file."""
 
     def get_source_stamp(self):
         stamp = super().get_source_stamp()
         py_file = getattr(self, "_py_file", None)
         if py_file is not None and is_stamped(Path(py_file)):
-            return stamp, *(package_stamp(root) for root in STAMP_SOURCES), plugin_stamp()
+            return Stamp((stamp, *(package_stamp(root) for root in STAMP_SOURCES), plugin_stamp()))
         return stamp
 
 
@@ -97,8 +103,9 @@ def cache_impl():
 
 
 def install() -> None:
-    """Wrap every numba cache locator with :class:`PackageStamped`, and numba's reading of a
-    cache index with :func:`_tolerant` (idempotent)."""
+    """Wrap every numba cache locator with :class:`PackageStamped`, and numba's reading and
+    writing of a cache index with :func:`_with_plugins` (and its reading with :func:`_tolerant`)
+    (idempotent)."""
     from numba.core import caching
 
     locators = cache_impl()._locator_classes
@@ -107,7 +114,20 @@ def install() -> None:
             locators[j] = type(locator.__name__, (PackageStamped, locator), {})
     index = caching.IndexDataCacheFile
     if not getattr(index._load_index, "tolerant", False):
-        index._load_index = _tolerant(index._load_index)
+        index._load_index = _with_plugins(_tolerant(index._load_index))
+        index._save_index = _with_plugins(index._save_index)
+
+
+def _with_plugins(method):
+    """A method of numba's cache index file that first brings the plugins' part of a
+    :class:`Stamp` up to date."""
+    def call(self, *args):
+        if isinstance(self._source_stamp, Stamp):
+            self._source_stamp = Stamp((*self._source_stamp[:-1], plugin_stamp()))
+        return method(self, *args)
+
+    call.tolerant = getattr(method, "tolerant", False)
+    return call
 
 
 def _tolerant(load_index):

@@ -155,7 +155,7 @@ class Lambert(Material):
 
     ``albedo`` may be a list (CONVENTIONS 4, every albedo from one run): the material scatters
     with the largest, and a run tallies each exit for every listed albedo
-    (:class:`microsim.integrators.records.Tally`)."""
+    (:class:`microsim.tally.Tally`)."""
 
     kind: Literal["lambert"]
     albedo: float | list[float] = Field(description="Lambertian albedo in [0, 1], or a list of them: every "

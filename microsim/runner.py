@@ -54,7 +54,7 @@ class Plan:
 
     @property
     def albedo_scale(self) -> np.ndarray:
-        """c_j / c_max of every albedo traced together (records.Tally); [1] for a run of one."""
+        """c_j / c_max of every albedo traced together (microsim.tally.Tally); [1] for a run of one."""
         if not self.albedos:
             return SINGLE_ALBEDO
         return np.asarray(self.albedos, np.float64) / max(self.albedos)
@@ -127,7 +127,7 @@ class PlanError(ValueError):
 def albedos_of(config) -> tuple:
     """The albedos of a run of several (CONVENTIONS 4), () for a run of one; PlanError where a
     list cannot be traced as one run: every interaction must be with the Lambertian material or
-    absorb everything (records.Tally)."""
+    absorb everything (microsim.tally.Tally)."""
     base = config.base
     if base is not None and len(getattr(base, "albedos", ())) > 1:
         raise PlanError("base.albedo: a list of albedos is taken by [material] only")
@@ -258,7 +258,8 @@ class _Reducer:
                                       for field, shape in zip(record, estimator.shapes()))
                 estimates = estimator.reduce(fields, tally.paths, i)
                 for name, value in estimates.items():
-                    res.estimates.setdefault(name, [Estimate.zeros(value.shape) for _ in self.plan.theta_i])
+                    if name not in res.estimates:
+                        res.estimates[name] = [Estimate.zeros(value.shape) for _ in self.plan.theta_i]
                     res.estimates[name][i].add(value)
                 exited += estimator.exited(estimates)
             lost = energy[j] / tally.paths
@@ -295,8 +296,8 @@ def memory_estimate(plan: Plan, sensor: Sensor, workers: int, spawned: bool = Fa
     tracing = plan.generator.scene_bytes(plan.scene) + paths + 2 * tally
     units = len(plan.units)
     processes = len(executors.split(plan.units, max(1, workers)))
-    # per incidence, the sums and squares of the estimates (the binning's: 7 rows to its tally's 5)
-    reducing = 5 * plan.n_incidences * tally + units * tally * (processes - 1) // processes
+    estimates = max(1, len(plan.albedos)) * sum(e.estimate_values() for e in plan.build_estimators(sensor)) * 8
+    reducing = 3 * plan.n_incidences * estimates + units * tally * (processes - 1) // processes
     workers_bytes = (PROCESS_BYTES if spawned else WORKER_BYTES) * processes if processes > 1 or spawned else 0
     return PROCESS_BYTES + workers_bytes + tracing * processes + reducing
 

@@ -3,7 +3,7 @@ resumes where it stopped (``microsim run --resume``, CONVENTIONS 7).
 
 A run's units (realization x incidence, :attr:`microsim.runner.Plan.units`) are saved one file
 each, as they end, in the directory ``<table>.partial`` beside the table: the unit's tally
-(:class:`~microsim.integrators.records.Tally`, arrays stored exactly in ``.npz``) and its
+(:class:`~microsim.tally.Tally`: each estimator's fields, arrays stored exactly in ``.npz``) and its
 realization's scene info (JSON). Each file is written under a temporary name, flushed to disk
 and renamed, so a kill or a crash of the machine leaves whole units only; a file that does not
 read back whole is dropped when the store opens, and its unit is traced again.

@@ -33,6 +33,7 @@ def test_every_numba_locator_adds_the_package_stamp_for_microsim_files_only(tmp_
     inside = in_tree.from_function(kernel, kernel_cache.__file__)
     assert inside.get_source_stamp()[1:] == (*(package_stamp(root) for root in kernel_cache.STAMP_SOURCES),
                                               kernel_cache.plugin_stamp())
+    assert isinstance(inside.get_source_stamp(), kernel_cache.Stamp)
     assert kernel_cache.STAMP_SOURCES[1].name == "geometry"
     outside_file = tmp_path / "elsewhere.py"
     outside_file.write_text("def kernel():\n    return 0\n")
@@ -103,9 +104,9 @@ def test_an_edit_of_a_generator_recompiles_the_kernels(tmp_path):
 
 
 def test_a_plugin_registered_from_another_file_joins_the_stamp(tmp_path, monkeypatch):
-    """A hook or a material kind compiled into microsim's kernels from another module
-    (microsim.dispatch, microsim.materials): an edit of its file changes the stamp; microsim's
-    own files are stamped already and are not added."""
+    """An estimator's hook compiled into microsim's kernels from another module
+    (microsim.dispatch): an edit of its file changes the stamp; microsim's own files are stamped
+    already and are not added."""
     monkeypatch.setattr(kernel_cache, "PLUGIN_SOURCES", set())
     kernel_cache.add_plugin_source(kernel_cache.__file__)
     assert kernel_cache.plugin_stamp() == b""
@@ -125,3 +126,23 @@ def test_an_index_that_names_a_module_this_process_cannot_import_is_a_stale_one(
     assert getattr(caching.IndexDataCacheFile._load_index, "tolerant", False)
     unreadable = b"cno_such_plugin_module\nRecord\n."  # a pickle of a class of a missing module
     assert kernel_cache._tolerant(lambda index: pickle.loads(unreadable))(None) == {}
+
+
+def test_a_plugin_registered_after_a_kernel_was_defined_makes_its_cache_stale(tmp_path, monkeypatch):
+    """numba takes a kernel's stamp when the kernel is defined, before plugins register: a cache
+    entry saved before a plugin's file changed is not loaded after (the index's stamp is brought
+    up to date as it is read and written)."""
+    from numba.core import caching
+
+    monkeypatch.setattr(kernel_cache, "PLUGIN_SOURCES", set())
+    index = caching.IndexDataCacheFile(str(tmp_path), "kernel", kernel_cache.Stamp(("own", kernel_cache.plugin_stamp())))
+    index.save("key", b"machine code")
+    assert index.load("key") == b"machine code"
+    plugin = tmp_path / "plugin.py"
+    plugin.write_text("X = 1\n")
+    kernel_cache.add_plugin_source(plugin)
+    assert index.load("key") is None  # stale: compiled again
+    index.save("key", b"new machine code")
+    assert index.load("key") == b"new machine code"
+    plugin.write_text("X = 22\n")
+    assert index.load("key") is None

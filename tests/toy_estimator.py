@@ -23,6 +23,9 @@ class ExitCounts(Estimator):
     def shapes(self):
         return ((ORDERS,),)
 
+    def estimate_values(self):
+        return ORDERS
+
     def reduce(self, fields, paths, incidence):
         return {"exit_fraction_order": fields.count / paths}
 
@@ -32,12 +35,11 @@ class ExitCounts(Estimator):
 
 
 @ON_EXIT.register(ExitCountsTally)
-@numba.njit(cache=True)
 def on_exit(record, tally, paths, i, d, sensor):
     add_one(record.count[tally.row], min(paths.order[i], ORDERS) - 1)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy", _nrt=False)
 def add_one(count, order):
     """count[order] += 1, for each albedo of a run of several (the branch on ndim is resolved
     when numba compiles, for an argument)."""

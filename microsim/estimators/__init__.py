@@ -63,9 +63,14 @@ class Estimator:
         and albedo axes; ``paths`` traced at incidence number ``incidence``), by name."""
         raise NotImplementedError
 
+    def estimate_values(self) -> int:
+        """How many numbers :meth:`reduce` returns for one unit (for the memory estimate)."""
+        raise NotImplementedError
+
     def exited(self, estimates: dict[str, np.ndarray]) -> float:
         """The share of the unit's energy that left through the top, as these estimates count it,
-        for the energy balance (0 for an estimator that does not count every exit)."""
+        for the energy balance: one estimator of a run counts it (the exit binning), every other
+        returns 0."""
         return 0.0
 
     def write(self, put, estimates: dict) -> None:

@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from ..orders import ORDERS, RESULT_ALL_ORDERS, RESULT_ORDER1_BASE, RESULT_ORDERS12
+from ..orders import ORDERS, RESULT_ALL_ORDERS, RESULT_ORDER1_BASE, RESULT_ORDERS12, RESULT_ROWS
 from ..sensor import cell_index, retro_ring
 from . import Estimator
 from .hooks import ON_EXIT
@@ -52,6 +52,9 @@ class ExitBins(Estimator):
             estimates["brdf_retro"] = np.divide(rings, projected, out=np.zeros_like(rings), where=projected > 0)
         return estimates
 
+    def estimate_values(self):
+        return RESULT_ROWS * (self.sensor.tally_width + 1)  # brdf and brdf_retro rows, and albedo
+
     def exited(self, estimates):
         return estimates["albedo"][RESULT_ALL_ORDERS]
 
@@ -81,7 +84,6 @@ class ExitBins(Estimator):
 
 
 @ON_EXIT.register(ExitBinsTally)
-@numba.njit(cache=True, error_model="numpy", inline="always")
 def on_exit(record, tally, paths, i, d, sensor):
     """Path i leaves along d: its weight goes to d's sensor cell, in the row of its order (and in
     BASE_ROW too if its one interaction was with the base plane); and likewise to d's retro ring,

@@ -115,9 +115,8 @@ def event(work, row, waiting, beam, world, sensor, tally):
     segment, or start path ``number`` of ``waiting`` = (number, end) in its row if it ended and
     paths are left. Returns (row busy, next path number)."""
     (number, end), (scene, handle) = waiting, world
-    prim, t, normal = embree.hit_of(handle, work.records, row)
-    alive, o, d = follow(work.paths, work.rays, row, (prim, np.float64(t), normal), scene, sensor, beam.max_order,
-                         tally)
+    prim, t, normal = embree.hit_of(handle, work.queries, row)
+    alive, o, d = follow(work, row, (prim, np.float64(t), normal), world, sensor, beam.max_order, tally)
     if alive:
         prepare_segment(work.rays, row, o, d, scene)
         return True, number
@@ -132,7 +131,7 @@ def query(handle, work, j):
     """Embree's closest hit on the segment in row j, left in its record (and the query logged if
     a ray log is kept)."""
     rays = work.rays
-    embree.clear_hit(work.records[j])  # the segment is in the query already (prepare_segment)
+    embree.clear_hit(work.queries[j])  # the segment is in the query already (prepare_segment)
     if len(work.log):
         k = work.logged[0]
         work.logged[0] = k + 1
@@ -141,11 +140,10 @@ def query(handle, work, j):
                 work.log[k, axis] = rays.origin[j, axis]
                 work.log[k, 3 + axis] = rays.direction[j, axis]
             work.log[k, 6] = rays.tfar[j]
-    embree.trace(handle.handle, work.records, j)
+    embree.trace(handle.handle, work.queries, j)
 
 
 @VISIBILITY.register(DirectWorld)
-@numba.njit(cache=True, error_model="numpy", _nrt=False)
 def visible_through_tile(world, work, i, state, wo):
     """1 if the ray from the surface point of ``state`` = (point, normal, shape), lifted off the
     surface as a scattered ray is (the clearance along the normal), reaches z_top along wo without
@@ -160,7 +158,7 @@ def visible_through_tile(world, work, i, state, wo):
     for _ in range(MAX_IDLE_SEGMENTS):
         prepare_segment(rays, i, o, wo, scene)
         end, t = rays.end[i], np.float64(rays.tfar[i])
-        if embree.is_occluded(handle.handle, work.records, i):
+        if embree.is_occluded(handle.handle, work.queries, i):
             return 0.0
         if end == TOP:
             return 1.0

@@ -15,6 +15,8 @@ a batch (its row and embreex's outputs), 70 MB at most.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
@@ -25,6 +27,20 @@ from .surface_transport import follow, prepare_segment, start_path
 
 #: paths traced at once; their tallies are added batch after batch
 BATCH_PATHS = 1 << 20
+
+
+class EmbreexWorld(NamedTuple):
+    """What the shared event kernels trace on this backend: the scene's arrays (Embree is called
+    from Python: no handle, and no visibility query)."""
+
+    scene: object
+
+
+class Lanes(NamedTuple):
+    """The live paths of a batch and their segments (the direct backend's workspace has more)."""
+
+    paths: object
+    rays: object
 
 
 def backend(scene, threads: int, estimators):
@@ -111,9 +127,10 @@ def advance(n, paths, rays, hits, scene, sensor, max_order, tally):
     """
     prim, normal = hits
     live = 0
+    lanes, world = Lanes(paths, rays), EmbreexWorld(scene)
     for i in range(n):
         hit = (prim[i], np.float64(rays.tfar[i]), (normal[i, 0], normal[i, 1], normal[i, 2]))
-        keep, o, d = follow(paths, rays, i, hit, scene, sensor, max_order, tally)
+        keep, o, d = follow(lanes, i, hit, world, sensor, max_order, tally)
         if keep:
             move_path(paths, live, i)
             prepare_segment(rays, live, o, d, scene)

@@ -101,7 +101,6 @@ def scatter_in_medium(world, paths, i, path):
 
 
 @VISIBILITY.register(Medium)
-@numba.njit(cache=True, error_model="numpy", _nrt=False)
 def transmittance(world, work, i, state, wo):
     """exp(-tau) from depth ``state`` = z (<= 0, in mean free paths) to the surface along wo: the
     optical path -z / wo_z; 0 for wo going down or level."""

@@ -36,20 +36,21 @@ WAVE_CHUNKS_PER_THREAD = 4
 #: paths of a chunk traced side by side (:func:`trace_chunk`)
 SLOTS = 2
 
-#: SLOTS rows per chunk of a wave (the paths it is tracing, their segments and Embree queries)
+#: SLOTS rows per chunk of a wave (the paths it is tracing, their segments and Embree queries:
+#: RTCRayHit records)
 #: and one row per chunk (its tally: the estimators' records, lost energy, counts); and the ray
 #: log (origin, direction, tfar of every query, in order; empty unless asked for)
-Workspace = namedtuple("Workspace", ["paths", "rays", "records", "estimates", "energy", "counts", "log", "logged"])
+Workspace = namedtuple("Workspace", ["paths", "rays", "queries", "estimates", "energy", "counts", "log", "logged"])
 
 
 def workspace(rows: int, estimators, log_rays: int = 0, albedos: int = 1) -> Workspace:
     """Tallies of ``estimators`` for ``rows`` chunks (of ``albedos`` albedos each), and SLOTS path
     rows (paths, queries) for each: two query records at least, as the views into a single
     record would be contiguous, which numba types apart (a second compile of every kernel)."""
-    records = embree.ray_hits(SLOTS * rows)
-    rays = Rays(*embree.ray_views(records), np.zeros(SLOTS * rows, np.int8))  # segments written into the queries
+    queries = embree.ray_hits(SLOTS * rows)
+    rays = Rays(*embree.ray_views(queries), np.zeros(SLOTS * rows, np.int8))  # segments written into the queries
     axis = (albedos,) if albedos > 1 else ()  # one albedo: no albedo axis (microsim.tally.Tally)
-    return Workspace(allocate_paths(SLOTS * rows), rays, records,
+    return Workspace(allocate_paths(SLOTS * rows), rays, queries,
                      tuple(estimator.allocate(rows, albedos) for estimator in estimators),
                      np.zeros((rows, *axis, len(ENERGY_NAMES))), np.zeros((rows, len(COUNT_NAMES)), np.int64),
                      np.zeros((log_rays, 7), np.float32), np.zeros(1, np.int64))

@@ -17,7 +17,8 @@ from ..tally import SINGLE_ALBEDO
 from . import direct, embreex
 from .records import Beam
 
-#: ``run.backend`` -> the module of that backend: ``backend(scene, threads)`` and ``compile_kernels``
+#: ``run.backend`` -> the module of that backend: ``backend(scene, threads, estimators)`` and
+#: ``compile_kernels(beam, scene, sensor, estimators)``
 BACKENDS = {"direct": direct, "embreex": embreex}
 
 
@@ -44,11 +45,11 @@ class SurfaceTracer:
         self.backend = backend_module(backend).backend(scene, threads, estimators)
 
     def trace(self, wi, n_paths: int, key, max_order: int, albedo_scale=SINGLE_ALBEDO):
-        """Trace ``n_paths`` paths arriving along -``wi``; return their :class:`~records.Tally`.
+        """Trace ``n_paths`` paths arriving along -``wi``; return their :class:`~microsim.tally.Tally`.
 
         ``key`` selects the random stream (see :mod:`microsim.physics.rng`); ``max_order`` = 0 means
         unlimited, k > 0 truncates a path at its (k+1)-th interaction; ``albedo_scale`` holds
-        c_j / c_max for a run of several albedos (:class:`~records.Tally`).
+        c_j / c_max for a run of several albedos (:class:`~microsim.tally.Tally`).
         """
         beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order,
                     np.asarray(albedo_scale, np.float64))

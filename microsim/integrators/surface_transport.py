@@ -66,15 +66,17 @@ def start_path(paths, rays, i, number, beam, scene):
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def follow(paths, rays, i, hit, scene, sensor, max_order, tally):
-    """Path i traced the segment in row i of ``rays`` and met ``hit`` = (primitive or -1, its
+def follow(work, i, hit, world, sensor, max_order, tally):
+    """Path i traced the segment in row i of ``work.rays`` and met ``hit`` = (primitive or -1, its
     distance t, Embree's float32 geometric normal); take it through the event there
-    (:func:`microsim.integrators.walk.take_event`).
+    (:func:`microsim.integrators.walk.take_event`). ``world``: a backend's world, whose ``scene``
+    holds the scene's arrays.
 
     Returns (alive, origin, direction) of its next segment: a surface hit scatters (or passes a
     back face, or is truncated by ``max_order``); a miss leaves through the top (exit),
     the bottom (transmitted) or a tile side (wrapped).
     """
+    rays, scene = work.rays, world.scene
     o = (np.float64(rays.origin[i, 0]), np.float64(rays.origin[i, 1]), np.float64(rays.origin[i, 2]))
     d = (np.float64(rays.direction[i, 0]), np.float64(rays.direction[i, 1]), np.float64(rays.direction[i, 2]))
     p, t, ng = hit
@@ -97,7 +99,7 @@ def follow(paths, rays, i, hit, scene, sensor, max_order, tally):
             kind = TRANSMISSION
         else:
             state = (wrap_side(o, d, t, end, scene.tile), state[1], -1)
-    alive, d, state = take_event(scene, paths, i, (kind, d, state), max_order, sensor, tally, interact_on_shape)
+    alive, d, state = take_event(world, work, i, (kind, d, state), max_order, sensor, tally, interact_on_shape)
     return alive, state[0], d
 
 
@@ -107,12 +109,13 @@ def interact_on_shape(world, paths, i, path):
     path's state: the point, the normal, the shape); the next segment starts off the surface,
     the :func:`clearance` along its normal."""
     d, (p, n, s) = path
-    m = world.shape_material[s]
-    wo, factor, cut = scatter(world.material_code[m], world.material_params[m], paths.rng, i, d, n)
+    scene = world.scene
+    m = scene.shape_material[s]
+    wo, factor, cut = scatter(scene.material_code[m], scene.material_params[m], paths.rng, i, d, n)
     if paths.order[i] == 0:
-        paths.from_base[i] = m == world.base_material
+        paths.from_base[i] = m == scene.base_material
     paths.idle[i] = 0
-    return wo, factor, cut, (wrap_point(p, n, clearance(p, world.shape_size[s]), world.tile), n, s)
+    return wo, factor, cut, (wrap_point(p, n, clearance(p, scene.shape_size[s]), scene.tile), n, s)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

@@ -224,14 +224,12 @@ def interact_on_facet(world, paths, i, path):
 
 
 @VISIBILITY.register(GrooveWorld)
-@numba.njit(cache=True, error_model="numpy", _nrt=False)
 def visible_in_groove_analytic(world, work, i, state, wo):
     """:func:`groove_visibility` by :func:`meet_analytic`."""
     return groove_visibility(world, work, i, state, wo, meet_analytic)
 
 
 @VISIBILITY.register(EmbreeGrooveWorld)
-@numba.njit(cache=True, error_model="numpy", _nrt=False)
 def visible_in_groove_embree(world, work, i, state, wo):
     """:func:`groove_visibility` by :func:`meet_embree`."""
     return groove_visibility(world, work, i, state, wo, meet_embree)
@@ -286,18 +284,18 @@ def meet_embree(world, work, row, position, motion, h, last):
     elif last == RIGHT:
         cx, cz = cx - EMBREE_OFFSET * _SQRT_HALF, cz + EMBREE_OFFSET * _SQRT_HALF
     tfar = -cz / cdz if cdz > 0.0 else math.inf
-    records = work.records
-    embree.set_ray(records[row], (cx, 0.0, cz), (du, 0.0, cdz), tfar)
+    queries = work.queries
+    embree.set_ray(queries[row], (cx, 0.0, cz), (du, 0.0, cdz), tfar)
     if len(work.log):
         k = work.logged[0]
         work.logged[0] = k + 1
         if k < len(work.log):
-            record = records[row]
+            record = queries[row]
             work.log[k, 0], work.log[k, 1], work.log[k, 2] = record.org_x, record.org_y, record.org_z
             work.log[k, 3], work.log[k, 4], work.log[k, 5] = record.dir_x, record.dir_y, record.dir_z
             work.log[k, 6] = record.tfar
-    embree.trace(world.handle.handle, records, row)
-    record = records[row]
+    embree.trace(world.handle.handle, queries, row)
+    record = queries[row]
     if record.geomID == embree.INVALID_ID:
         return NONE, 0.0
     if record.primID < LEFT_FACET_TRIANGLES:

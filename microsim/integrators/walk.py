@@ -20,8 +20,11 @@ and, registered on its world's class (:data:`VISIBILITY`), the visibility query
 ``visibility(world, work, i, state, wo)``: the transmittance from the point of an interaction
 (the path's state there) along wo to above the surface (Embree's occluded query through the
 periodic tile, the analytic groove, exp(-tau) in the medium), what next-event estimation weighs
-a point estimate by; it is called rarely and by estimators, so it is dispatched by the world's
-type (:mod:`microsim.dispatch`).
+a point estimate by. An estimator's ``on_interaction`` hook gets the world and the workspace
+(row i's query record is free during the event) and calls it; it is called rarely, so it is
+dispatched by the world's type (:mod:`microsim.dispatch`). The embreex backend, which queries
+Embree a segment of every path at a time, has none. The Embree intersector of the V-cavities
+logs its visibility queries with its others when a ray log is kept.
 
 :func:`take_event` then does, once for every integrator, what an event means: an exit goes to
 every estimator (:func:`microsim.estimators.hooks.each_exit`); transmission and truncation are
@@ -69,10 +72,12 @@ VISIBILITY = Generic(visibility)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def take_event(world, paths, i, event, max_order, sensor, tally, interact):
-    """Row i met ``event`` = (kind, d, state): take it through it (module doc); ``interact`` is
-    the transport's. Returns (alive, d, state) of the path after it."""
+def take_event(world, work, i, event, max_order, sensor, tally, interact):
+    """Row i of ``work`` met ``event`` = (kind, d, state): take it through it (module doc);
+    ``interact`` is the transport's (any kind not named is an interaction). Returns (alive, d,
+    state) of the path after it."""
     kind, d, state = event
+    paths = work.paths
     if kind == EXIT:
         each_exit(tally.estimates, tally, paths, i, d, sensor)
         return False, d, state
@@ -86,7 +91,7 @@ def take_event(world, paths, i, event, max_order, sensor, tally, interact):
         return not idled(paths, i, tally), d, state
     if cut_at_max_order(paths, i, max_order, tally):
         return False, d, state
-    each_interaction(tally.estimates, tally, paths, i, world, (d, state))
+    each_interaction(tally.estimates, tally, work, i, world, (d, state))
     wo, factor, cut, leaving = interact(world, paths, i, (d, state))
     return interacted(paths, i, factor, cut, tally), wo, leaving
 
@@ -100,7 +105,7 @@ def walk(row, beam, world, sensor, tally, start, next_event, interact):
     path = start(world, work, i, number, beam)
     while True:
         event = next_event(world, work, i, path, tally)
-        alive, d, state = take_event(world, work.paths, i, event, beam.max_order, sensor, tally, interact)
+        alive, d, state = take_event(world, work, i, event, beam.max_order, sensor, tally, interact)
         if not alive:
             return
         path = (d, state)
