@@ -27,15 +27,13 @@ from pathlib import Path
 import click
 
 from .compare import ORDER_ROWS
+from .choices import BACKEND_CHOICES, EXECUTORS
 from .orders import RESULT_ALL_ORDERS
 
 # The modules of the work itself (config and geometry, numba, h5py, the models) are imported by
 # each command as it needs them: --help, `models` and a refused argument answer without them.
 
 EXIT_BAD_INPUT = 2
-#: ``--executor`` choices: the keys of microsim.runner.EXECUTORS (named here so that --help
-#: loads no numba)
-EXECUTORS = ("local", "dask")
 #: what a Dask scheduler's address looks like: [tcp|tls|ws|wss://]host:port
 SCHEDULER_ADDRESS = re.compile(r"^((tcp|tls|ws|wss)://)?(?P<host>[A-Za-z0-9._\-\[\]:]+):(?P<port>\d{1,5})$")
 #: threads a process may run (Python threads, each tracing in a numba call without the GIL)
@@ -146,7 +144,7 @@ def cli():
 @click.option("--workers", type=click.IntRange(1, 256), default=1, show_default=True, help="worker processes")
 @click.option("--threads", type=click.IntRange(1, MAX_THREADS), default=1, show_default=True,
               help="threads per process, sharing one scene (direct backend)")
-@click.option("--backend", type=click.Choice(["auto", "direct", "embreex"]),
+@click.option("--backend", type=click.Choice(BACKEND_CHOICES),
               help="how Embree is called (overrides run.backend)")
 @click.option("--paths", type=click.IntRange(1, 10**12), help="paths per incidence (overrides run.paths)")
 @click.option("--seed", type=click.IntRange(0, 2**63 - 1), help="random seed (overrides run.seed)")

@@ -22,6 +22,7 @@ from pydantic import BaseModel, Field
 
 import geometry
 
+from .choices import BACKEND_CHOICES
 from .materials import MATERIALS
 from .schema import Section
 
@@ -80,7 +81,7 @@ class Run(Section):
     realizations: int = Field(32, ge=2, le=100_000, description="independent geometry samples = batches of the standard errors")
     seed: int = Field(1, ge=0, le=2**63 - 1)
     max_order: int = Field(0, ge=0, le=1_000_000)
-    backend: Literal["auto", "direct", "embreex"] = Field(
+    backend: Literal[BACKEND_CHOICES] = Field(
         "auto", description="how Embree is called: direct (numba, native spheres, threads) or embreex; "
                             "auto = direct where its binding loads")
 

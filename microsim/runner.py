@@ -343,7 +343,7 @@ def compile_tracer(plan: Plan, sensor: Sensor | None = None) -> None:
     stream_key(plan.config.run.seed, 0, 0)  # each unit's random stream
 
 
-#: the executors of ``--executor`` (microsim.executors)
+#: the executors of ``--executor`` (microsim.executors), as microsim.choices.EXECUTORS names them
 EXECUTORS = {"local": executors.local, "dask": executors.dask}
 
 

@@ -17,7 +17,7 @@ from ..tally import SINGLE_ALBEDO
 from . import direct, embreex
 from .records import Beam
 
-#: ``run.backend`` -> the module of that backend: ``backend(scene, threads, estimators)`` and
+#: ``run.backend`` -> the module of that backend (as microsim.choices.BACKENDS names them): ``backend(scene, threads, estimators)`` and
 #: ``compile_kernels(beam, scene, sensor, estimators)``
 BACKENDS = {"direct": direct, "embreex": embreex}
 

@@ -1,0 +1,11 @@
+"""The names a user chooses among, one list each: the command line's choices, the config schema
+and the runner read them from here (numbers and names only: ``--help`` imports no numba).
+``tests/test_choices.py`` checks that the modules that implement them implement exactly these."""
+
+#: how Embree is called (``run.backend``, ``--backend``): the modules of
+#: microsim.integrators.surface.BACKENDS
+BACKENDS = ("direct", "embreex")
+#: ``run.backend`` and ``--backend`` accept these: "auto" is direct where its binding loads
+BACKEND_CHOICES = ("auto", *BACKENDS)
+#: where units are traced (``--executor``): the functions of microsim.runner.EXECUTORS
+EXECUTORS = ("local", "dask")

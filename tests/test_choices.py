@@ -1,0 +1,16 @@
+"""One list each of the names a user chooses among (microsim.choices), and the modules that
+implement them implement exactly those."""
+
+import typing
+
+from microsim import choices, config, runner
+from microsim.integrators import surface
+
+
+def test_every_backend_named_is_implemented_and_no_other():
+    assert tuple(surface.BACKENDS) == choices.BACKENDS
+    assert typing.get_args(config.Run.model_fields["backend"].annotation) == choices.BACKEND_CHOICES
+
+
+def test_every_executor_named_is_implemented_and_no_other():
+    assert tuple(runner.EXECUTORS) == choices.EXECUTORS
