@@ -287,8 +287,8 @@ def memory_estimate(plan: Plan, sensor: Sensor, workers: int, spawned: bool = Fa
     realization's scene (the generator's ``scene_bytes``), a batch of path rows or the chunk
     tallies of a wave, and its unit's tally; the main process sums into per-incidence estimates
     and buffers the tallies of units that arrive early (up to all but one worker's share)."""
-    tally = max(1, len(plan.albedos)) * sum(8 * math.prod(shape) for estimator in plan.build_estimators(sensor)
-                                            for shape in estimator.shapes())
+    estimators, albedos = plan.build_estimators(sensor), max(1, len(plan.albedos))
+    tally = 8 * albedos * sum(estimator.tally_values() for estimator in estimators)
     if plan.backend == "embreex":
         paths = min(plan.paths_per_realization, embreex.BATCH_PATHS) * PATH_ROW_BYTES
     else:
@@ -296,7 +296,7 @@ def memory_estimate(plan: Plan, sensor: Sensor, workers: int, spawned: bool = Fa
     tracing = plan.generator.scene_bytes(plan.scene) + paths + 2 * tally
     units = len(plan.units)
     processes = len(executors.split(plan.units, max(1, workers)))
-    estimates = max(1, len(plan.albedos)) * sum(e.estimate_values() for e in plan.build_estimators(sensor)) * 8
+    estimates = 8 * albedos * sum(estimator.estimate_values() for estimator in estimators)
     reducing = 3 * plan.n_incidences * estimates + units * tally * (processes - 1) // processes
     workers_bytes = (PROCESS_BYTES if spawned else WORKER_BYTES) * processes if processes > 1 or spawned else 0
     return PROCESS_BYTES + workers_bytes + tracing * processes + reducing

@@ -31,12 +31,17 @@ SEGMENTS, INSIDE_HITS, ROULETTE_KILLS = 0, 1, 2
 COUNT_NAMES = ("segments", "inside_hits", "roulette_kills")
 
 
+def albedo_axis(albedos: int) -> tuple:
+    """The albedo axis of a tally's arrays: (albedos,) for a run of several, none for one (so
+    that one albedo runs the kernels it ran before albedo lists)."""
+    return (albedos,) if albedos > 1 else ()
+
+
 def empty_tally(paths: int, estimators, albedo_scale=SINGLE_ALBEDO) -> Tally:
     """A zero tally of ``paths`` paths for ``estimators`` (one row each) and these albedos."""
     albedos = len(albedo_scale)
-    axis = (albedos,) if albedos > 1 else ()
     return Tally(paths, 0, tuple(estimator.allocate(1, albedos) for estimator in estimators),
-                 np.zeros((*axis, len(ENERGY_NAMES))), np.zeros(len(COUNT_NAMES), np.int64),
+                 np.zeros((*albedo_axis(albedos), len(ENERGY_NAMES))), np.zeros(len(COUNT_NAMES), np.int64),
                  np.asarray(albedo_scale, np.float64))
 
 

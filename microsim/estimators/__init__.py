@@ -22,9 +22,12 @@ exits on the sensor's cells.
 from __future__ import annotations
 
 import importlib
+import math
 from typing import ClassVar
 
 import numpy as np
+
+from ..tally import albedo_axis
 
 #: estimator name -> "module:class", imported on use; a run uses every estimator whose
 #: :meth:`Estimator.wanted` says so, in this order
@@ -55,8 +58,11 @@ class Estimator:
 
     def allocate(self, rows: int, albedos: int):
         """A zero ``Record`` of ``rows`` rows (and an albedo axis if ``albedos`` > 1)."""
-        axis = (albedos,) if albedos > 1 else ()
-        return self.Record(*(np.zeros((rows, *axis, *shape)) for shape in self.shapes()))
+        return self.Record(*(np.zeros((rows, *albedo_axis(albedos), *shape)) for shape in self.shapes()))
+
+    def tally_values(self) -> int:
+        """How many numbers a row of its tally holds, for one albedo (for the memory estimate)."""
+        return sum(math.prod(shape) for shape in self.shapes())
 
     def reduce(self, fields, paths: int, incidence: int) -> dict[str, np.ndarray]:
         """The estimates of one unit (``fields``: its ``Record`` for one albedo, without the row

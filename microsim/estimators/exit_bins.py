@@ -10,6 +10,7 @@ path may count in a cell and a ring). The albedos are the sums over the cells.
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import numba
@@ -58,13 +59,11 @@ class ExitBins(Estimator):
     def exited(self, estimates):
         return estimates["albedo"][RESULT_ALL_ORDERS]
 
-    @property
+    @functools.cached_property
     def retro_projected_solid_angle(self) -> list[np.ndarray]:
         """Per incidence of the run, the projected solid angles of the retro rings about it."""
-        if not hasattr(self, "_retro_projected"):
-            self._retro_projected = [self.sensor.retro_projected_solid_angle(self.plan.incidence_direction(i))
-                                     for i in range(self.plan.n_incidences)]
-        return self._retro_projected
+        return [self.sensor.retro_projected_solid_angle(self.plan.incidence_direction(i))
+                for i in range(self.plan.n_incidences)]
 
     def write(self, put, estimates):
         if self.sensor.retro_rings:

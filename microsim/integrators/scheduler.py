@@ -25,7 +25,7 @@ import numba
 import numpy as np
 
 from .. import embree
-from ..tally import COUNT_NAMES, ENERGY_NAMES, Tally, add_rows, empty_tally
+from ..tally import COUNT_NAMES, ENERGY_NAMES, Tally, add_rows, albedo_axis, empty_tally
 from .records import Rays, allocate_paths
 
 #: paths of one chunk: traced in order by one thread, into a tally of their own (module doc)
@@ -49,10 +49,9 @@ def workspace(rows: int, estimators, log_rays: int = 0, albedos: int = 1) -> Wor
     record would be contiguous, which numba types apart (a second compile of every kernel)."""
     queries = embree.ray_hits(SLOTS * rows)
     rays = Rays(*embree.ray_views(queries), np.zeros(SLOTS * rows, np.int8))  # segments written into the queries
-    axis = (albedos,) if albedos > 1 else ()  # one albedo: no albedo axis (microsim.tally.Tally)
     return Workspace(allocate_paths(SLOTS * rows), rays, queries,
                      tuple(estimator.allocate(rows, albedos) for estimator in estimators),
-                     np.zeros((rows, *axis, len(ENERGY_NAMES))), np.zeros((rows, len(COUNT_NAMES)), np.int64),
+                     np.zeros((rows, *albedo_axis(albedos), len(ENERGY_NAMES))), np.zeros((rows, len(COUNT_NAMES)), np.int64),
                      np.zeros((log_rays, 7), np.float32), np.zeros(1, np.int64))
 
 

@@ -97,7 +97,7 @@ class VCavityTracer:
 
     #: seconds numba takes to compile the kernels of each backend, cold (AMD EPYC Zen 4, 2026-12-02;
     #: the progress line quotes it while it compiles)
-    COMPILE_SECONDS = {"direct": 10, "embreex": 10}
+    COMPILE_SECONDS = {"direct": 5, "embreex": 5}
 
     def __init__(self, scene, sensor, backend: str = "direct", threads: int = 1, estimators=None, log_rays: int = 0):
         if log_rays and (threads != 1 or scene.intersector != "embree"):
