@@ -1,5 +1,5 @@
-"""Every albedo from one run (CONVENTIONS 4): its wall time against separate runs, and its tables
-against theirs.
+"""Every albedo from one run (docs/conventions.md §4): its wall time against separate runs, and its
+tables against theirs.
 
 For the Lambert-sphere medium and a sphere suspension (phi = 0.3, default tile and depth), albedos
 0.3, 0.6, 0.9, 0.99, theta_i = 0 and 60 deg, 3240 cells, --paths per incidence, 32 realizations,

@@ -2,7 +2,7 @@
 
 For each volume fraction, the order-1 table (max_order = 1, albedo 0.9, default tile) is compared
 with the single scattering of a half space of Lambert-sphere point scatterers,
-c p(-wi.wo) / (mu_i + mu_o) (lambert_sphere_brdf.txt, Eq. 1 and 10), averaged over each cell, on
+c p(-wi.wo) / (mu_i + mu_o) (d'Eon 2021, Eq. 1 and 10), averaged over each cell, on
 cells more than 10 deg from the retro direction (the measure of issue 2, acceptance d), and with
 the finite-size model ``boolean_spheres_single`` (microsim/models/boolean_spheres.py: shadow
 hiding and the height of hit points above their centres, first order in r / l), on every cell.

@@ -3,7 +3,7 @@
 A tracer built from a small config, best of 3 batches of a fixed number of paths (after one
 small batch that compiles). Prints one JSON object. To compare two revisions, run it from each
 (``PYTHONPATH=<worktree> python benchmarks/integrator_speed.py``) in alternated processes,
-several of each (docs/performance.md); a revision before issue 25 imports the random streams
+several of each (docs/developer/performance.md); a revision before issue 25 imports the random streams
 from ``microsim.rng``. ``python benchmarks/integrator_speed.py medium`` runs that case only.
 About a minute.
 """

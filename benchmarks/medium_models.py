@@ -2,7 +2,7 @@
 Lambert-sphere scatterers (issue 12, item b), every albedo from one run.
 
 One run of ``halfspace_medium`` (phase ``lambert_sphere``) at albedos 0.3, 0.6, 0.9, 0.99
-(CONVENTIONS 4: traced once at 0.99), theta_i = 0, 30, 60, 80 deg, 3240 cells, --paths per
+(docs/conventions.md §4: traced once at 0.99), theta_i = 0, 30, 60, 80 deg, 3240 cells, --paths per
 incidence, 32 realizations; then, per albedo and incidence, ``microsim.compare`` of
 ``lambert_sphere`` (method exact: exact single scattering and the exact Horak-Chandrasekhar
 solution of the three-term phase function; method fit: the paper's fits) and

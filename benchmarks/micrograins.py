@@ -1,12 +1,11 @@
 """Micrograin fields against the micrograin model: paper Figs. 7-8 and 17-18, tile and tessellation.
 
-Analogues of Figs. 7-8 and 17-18 of the paper, and the tile / tessellation convergence of the
-scene at grazing incidence.
+Analogues of Figs. 7-8 and 17-18 of Lucas et al. 2024 (fully-correlated anisotropic micrograin
+BSDF), and the tile / tessellation convergence of the scene at grazing incidence.
 
-papers/micrograin_bsdf_anisotropic.txt; scene: geometry/micrograins.py; model:
-microsim/models/micrograin.py (``micrograin``, gaf = correlated | uncorrelated). Every run is one
-worker process of one thread (``runner.run(cfg, workers=1)``), so the benchmark can share a
-machine.
+Scene: geometry/micrograins.py; model: microsim/models/micrograin.py (``micrograin``, gaf =
+correlated | uncorrelated). Every run is one worker process of one thread
+(``runner.run(cfg, workers=1)``), so the benchmark can share a machine.
 
 (a) Figs. 7-8: conductor grains (eta + ik = 1.0152 + 6.6273i) on an absorbing base, theta_i =
     86 deg, phi_i = 0, single scattering (max_order = 1), one row per (tau0, beta_x, beta_y):
@@ -369,9 +368,10 @@ def versus_exact(table, exact) -> float:
 
 def part_c(workdir: Path, scale: float, realizations: int) -> dict:
     from geometry.micrograins import default_tile
+    from microsim.physics.boolean_model import grain_density
 
     paths = max(realizations, int(CONV_PATHS * scale))
-    default = default_tile(CONV_BETA, CONV_BETA, GRAZING_DEG)
+    default, _ = default_tile(CONV_BETA, CONV_BETA, GRAZING_DEG, grain_density(CONV_TAU0, CONV_BETA, CONV_BETA))
     print(f"(c) convergence: tau0 = {CONV_TAU0:g}, beta = {CONV_BETA:g}, conductor grains, theta_i = {GRAZING_DEG:g} "
           f"deg, order 1; {CONV_CELLS} cells, {paths} paths, {realizations} realizations; default tile {default:.1f}")
     print("    chi2/cell of order 1 against the correlated model (cells with signal); order-1 albedo; "

@@ -2,8 +2,8 @@
 models of Boolean Lambertian spheres hold, and by how much they fail.
 
 For volume fractions PHIS, one multi-albedo run of explicit spheres (albedos ALBEDOS traced
-together, CONVENTIONS 4) and one of the Lambert-sphere medium (halfspace_medium, the radiative
-transfer of the same phase function), theta_i in THETA_I_DEG, CELLS sensor cells and RETRO_RINGS
+together, docs/conventions.md §4) and one of the Lambert-sphere medium (halfspace_medium, the
+radiative transfer of the same phase function), theta_i in THETA_I_DEG, CELLS sensor cells and RETRO_RINGS
 retro rings out to a phase angle that scales with r / l. Tables are kept in
 benchmarks/out/sphere_study/ and reused (``--rerun`` traces them again). Then:
 

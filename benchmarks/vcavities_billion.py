@@ -1,6 +1,6 @@
 """One billion paths in V-cavities (issue 11 f), and the fastest exact way to intersect a groove.
 
-The setting of interfaced_lambertian_microfacets.txt Sec. 3.3 ("one billion light paths and a
+The setting of Meneveaux et al. 2015, Sec. 3.3 ("one billion light paths and a
 sensor containing 3240 cells"): Lambertian facets of albedo 0.8, Beckmann roughness 0.5, one
 incidence (theta_i = 45 deg), all orders.
 

@@ -1,5 +1,5 @@
-"""V-cavity inter-reflections (the analogue of Fig. 7 of interfaced_lambertian_microfacets.txt) and
-where the Oren-Nayar model stops holding.
+"""V-cavity inter-reflections (the analogue of Fig. 7 of Meneveaux et al. 2015) and where the
+Oren-Nayar model stops holding.
 
 (a) Fig. 7: the shipped runs runs/vcavities_{lambert,interfaced_lambert,conductor}.toml (Beckmann
     grooves, roughness 0.8 for the diffuse facets and 0.3 for the near-specular conductor, 3240

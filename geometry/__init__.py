@@ -1,4 +1,4 @@
-"""Generators of random microgeometry, one module per scene kind (CONVENTIONS 5).
+"""Generators of random microgeometry, one module per scene kind (docs/conventions.md §5).
 
 A generator module provides ``KIND``; ``INTEGRATOR``, the name of the integrator that traces
 its scenes (a key of ``microsim.integrators.INTEGRATORS``; "surface" for Embree triangles);

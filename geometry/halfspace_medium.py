@@ -1,14 +1,14 @@
-"""The radiative-transfer half space (CONVENTIONS 5.5): the volumetric reference.
+"""The radiative-transfer half space (docs/conventions.md §5.5): the volumetric reference.
 
 The half space z < 0 holds independent point scatterers with unit mean free path (lengths are
 in mean free paths), single-scattering albedo c = ``[material] albedo`` (``kind = "lambert"``:
 the scatterer's albedo) and the phase function ``phase``:
 
-- ``lambert_sphere``: the phase function of a Lambertian sphere, lambert_sphere_brdf.txt Eq. 1,
+- ``lambert_sphere``: the phase function of a Lambertian sphere, d'Eon 2021, Eq. 1,
   what the analytic Lambert-sphere BRDF approximates (``microsim.physics.phase``);
 - ``isotropic``: 1 / (4 pi), whose half space has Chandrasekhar's closed form (``rte_isotropic``).
 
-The albedo is in the table's config (a run of several albedos traces the largest, CONVENTIONS 4).
+The albedo is in the table's config (a run of several albedos traces the largest, conventions §4).
 No triangles: the medium integrator (:mod:`microsim.integrators.medium`) samples exponential
 free flights and exact phase-function directions. Nothing random belongs to a realization (the
 medium is homogeneous): a realization is an independent batch of paths. Every resolved value

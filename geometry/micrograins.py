@@ -1,9 +1,9 @@
-"""Micrograin fields (CONVENTIONS 5.3): half-ellipsoid grains on a base plane, a Boolean model.
+"""Micrograin fields (docs/conventions.md §5.3): half-ellipsoid grains on a base plane, a Boolean model.
 
 Grains are the upper halves of ellipsoids of vertical semi-axis 1 and lateral semi-axes
 1/beta_x, 1/beta_y (aligned with x and y), with centres a Poisson process on the base plane z = 0
 of density rho = lambda beta_x beta_y / pi, lambda = -ln(1 - tau0), so that a fraction tau0 of
-the base is covered (papers/micrograin_bsdf_anisotropic.txt, Eq. 8-9; the relations are in
+the base is covered (Lucas et al. 2024, Eq. 8-9; the relations are in
 :mod:`microsim.physics.boolean_model`, shared with the ``micrograin`` model). Grains overlap freely. The
 grains are made of ``[material]``, the plane of ``[base]`` (default: an absorber).
 
@@ -34,10 +34,8 @@ which a small tile brings at grazing angles, as measured for the sphere tile). T
 takes that guarantee from theta_o = 86 deg to 88.8 deg (the sensor's last ring reaches 90), and
 it puts 4 times more grains in each realization: at grazing incidence the light that reaches
 the base, or comes back near retro, passes a few gaps between grains, so the per-realization
-estimates are skewed, and the larger the tile the closer their mean is to normal. Measured at
-theta_i = 86 deg (tau0 = 0.6, beta = 0.5, conductor grains, order 1, 64 realizations, 100
-cells; ``benchmarks/micrograins.py`` part c): chi^2 per cell against the model 2.25 at L = 32
-(below the no-ghost reach, 36.6), 1.33 at the default 73.2, 0.68 at 146. The footprint term
+estimates are skewed, and the larger the tile the closer their mean is to normal (a tile below
+the no-ghost reach raised chi^2 per cell against the model at 86 deg). The footprint term
 keeps FOOTPRINTS grain widths in a tile of very flat grains, and the last term 10 grains expected
 in a sparse field (tau0 below about 0.03: a tile of fewer is often empty; a given tile that
 expects fewer is refused). The reach uses theta_max up to
@@ -45,17 +43,17 @@ MAX_REACH_DEG = 89.5 deg, and the default tile never holds more than MAX_DEFAULT
 (dense fields of tall grains at the most grazing incidences: light does not get far in them;
 ``tile_grain_budget`` in the table says when the budget set the tile).
 A larger tile is not free: the offsets that keep scattered rays off their own grain grow with
-the float32 spacing of the coordinates (microsim/integrators/surface.py), and where grains
-overlap an origin offset past a seam starts inside the neighbour (an "inside hit", passed
-through and counted). At tau0 = 0.99, beta_x / beta_y = 1/40, theta_i = 45 deg: 2.8e-4 of the
-segments in a 640-wide tile (32 widths of the long axis), 1.7e-4 in a 338-wide one (the default
-of a run whose incidences reach 89.5 deg), 0.6e-4 in a 160-wide one; at theta_i = 89.5 deg,
-4e-5 in that default tile (tests/test_micrograins.py). A path that passes into a grain that
-way may reach the base under it, and is then tallied as scattered by the base: the base term
-carries that error, bounded by the inside-hit rate. The ratio beta_x / beta_y is kept within
-[1/MAX_ANISOTROPY, MAX_ANISOTROPY] for that reason (at 1/1000 the inside hits reached 4e-3).
-Grains are cheap (one native sphere each; 1000 a realization at tau0 = 0.5, beta = 1). Every
-value used is recorded in the table's scene/ attrs.
+the float32 spacing of the coordinates (microsim/integrators/surface_transport.py), and where
+grains overlap an origin offset past a seam starts inside the neighbour (an "inside hit", passed
+through and counted; the rate grows with the tile, and stays below 1e-4 of the segments in the
+default tile of the most extreme field, tests/test_micrograins.py). A path that passes into a
+grain that way may reach the base under it, and is then tallied as scattered by the base: the
+base term carries that error, bounded by the inside-hit rate. The ratio beta_x / beta_y is kept
+within [1/MAX_ANISOTROPY, MAX_ANISOTROPY] for that reason (at 1/1000 the inside hits reached
+4e-3). Grains are cheap (one native sphere each; 1000 a realization at tau0 = 0.5, beta = 1).
+Every value used is recorded in the table's scene/ attrs.
+
+(measurements: docs/developer/performance.md, section 'Micrograin fields: tile size and inside hits')
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The flat plane z = 0 made of ``[material]``: the exactness reference (CONVENTIONS 5.1)."""
+"""The flat plane z = 0 made of ``[material]``: the exactness reference (docs/conventions.md §5.1)."""
 
 from typing import Literal
 

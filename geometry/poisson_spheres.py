@@ -1,4 +1,4 @@
-"""Boolean model of spheres (CONVENTIONS 5.2): Poisson centres in the slab -depth <= z < 0.
+"""Boolean model of spheres (docs/conventions.md §5.2): Poisson centres in the slab -depth <= z < 0.
 
 The optional ``[base]`` plane lies under every sphere, at the lowest point any mesh can reach
 (z = -depth - vertex radius): spheres rest above it and never cut it, so no hit point can be
@@ -33,31 +33,26 @@ Defaults (every value used is recorded in the table's scene/ attrs):
     grazing exits that count): a ray at theta_g that crosses a whole tile comes back at least a
     sphere diameter away from its own track, so the spheres it meets on its second pass are
     independent of those it missed on its first (the cylinders of radius r about the two passes
-    do not overlap). A 16 r tile at phi = 0.3 (1.4 r apart at 85 deg) made the albedo at
-    theta_i = 85 deg 0.59 +- 0.06 % too bright against a 64 r tile, with chi^2 per cell 1.56 on
-    400 cells; a 32 r tile was within -0.00 +- 0.04 %.
+    do not overlap); a tile that broke it (16 r at phi = 0.3) made the grazing albedo 0.6 % too
+    bright.
   64 r meets both for phi >= 0.061 and theta_g up to 88 deg. Below phi = 0.061 the tile is
   shorter than 3 l, and an outgoing ray can pass the periodic images of the spheres that shadow the
-  incoming one ("ghost" shadow hiding, brightest for grazing pairs in the plane of a tile axis).
-  Measured on order-1 tables against the finite-size model (boolean_spheres_single, chi^2 per
-  cell, 1.15 expected): at 64 r, 1.01-1.39 for phi = 0.005 and 0.02 up to theta_i = 85 deg; with
-  a 24 r tile, 1.9 and 2.6 at theta_i = 60 and 80 deg for phi = 0.005.
+  incoming one ("ghost" shadow hiding, brightest for grazing pairs in the plane of a tile axis);
+  at 64 r order-1 tables still agree with the finite-size model (``boolean_spheres_single``)
+  down to phi = 0.005.
   A tile longer than the floor still pays: a realization averages over the whole tile, so the
-  realization-to-realization spread falls as 1 / tile^2, while a path costs about the same. At
-  phi = 0.3 (``benchmarks/speed_accuracy.py``: 1 M paths, 32 realizations, 3 incidences) the
-  albedo's expected error was 0.22 % with a 32 r tile and 0.22 % at 48 r in 3.1-3.3 s, 0.120 % at
-  64 r in 3.1 s and 0.100 % at 128 r in 4.7 s; more paths do not lower the spread (0.120 % at
-  4 M paths, 64 r, in 11.4 s).
-  Beyond 64 r the slab of a dilute or bright medium (up to 40 free paths deep) would hold
-  millions of spheres.
+  realization-to-realization spread falls as 1 / tile^2, while a path costs about the same (more
+  paths do not lower that spread). Beyond 64 r the slab of a dilute or bright medium (up to 40
+  free paths deep) would hold millions of spheres.
 
 The rule that the defaults meet (issue 12, item f; ``benchmarks/sphere_defaults.py``): the bias
 of the albedo against a tile, or a depth, 4 times the default stays below 0.3 % (which is more
-than a third of the standard error a default run of 1 M paths reaches). Measured at phi = 0.02,
-0.1, 0.3 and 0.6 and theta_i up to 85 deg, every bias was under 0.14 %. The exact spheres have no
+than a third of the standard error a default run of 1 M paths reaches). The exact spheres have no
 tessellation bias. The depth's bias is bounded without a reference: the slab differs from the
 half space only by the light that crosses its bottom, so it lowers the albedo by at most
 ``energy/transmitted``.
+
+(measurements: docs/developer/performance.md, section 'Boolean spheres: tile and depth defaults')
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""V-cavity surfaces (CONVENTIONS 5.4): symmetric V-grooves whose facet normals follow D(m)(m.n).
+"""V-cavity surfaces (docs/conventions.md §5.4): symmetric V-grooves whose facet normals follow D(m)(m.n).
 
 The surface is a mosaic of grooves much longer than wide, all rims at z = 0. A groove is a pair of
 facets, m and its mirror image m' = (-m_x, -m_y, m_z) through the vertical plane along the
@@ -28,27 +28,30 @@ Two intersectors give the same surface (``intersector``):
   Embree once, which each path sees through its own linear map (rotation to the groove's axis,
   depth scaled by 1/tan(theta_m), the axial motion dropped): the ray parameter t is the same in
   both frames. The general Embree path, and the reference the analytic one is checked against.
-  Measured: the analytic intersector is the faster (``benchmarks/vcavities_billion.py``).
+  The analytic intersector is the faster (``benchmarks/vcavities_billion.py``).
 
-What the grooves do (measured, tests/test_vcavities.py):
+What the grooves do (tests/test_vcavities.py):
 
 - Single scattering is the microfacet BRDF with the Torrance-Sparrow G, exactly, at every
   azimuth and up to grazing angles: facet m is lit from its rim down to the fraction
   G1(i, m) = min(1, 2 (n.m)(n.i) / (i.m)) of its length and seen from the same rim down to
   G1(o, m) (a direction on the other side of the groove sees it all), so the lit and seen part
-  is min(G1(i), G1(o)), Eq. 14. Its Smith counterpart is not (the tests show the bound fails).
+  is min(G1(i), G1(o)), Meneveaux et al. 2015, Eq. 14. Its Smith counterpart is not (the tests
+  show the bound fails).
 - Specular facets have a caustic at the macro-surface's specular direction in order 2. Two mirror
   reflections in a groove rotate the direction about the groove's axis by 4 theta_m, which keeps
   its component along the axis; so for each groove azimuth one tilt, theta_m = half the ray's
   elevation in the cross-section, sends it exactly to the specular direction: a one-parameter
   family of grooves onto one direction. The order-2 density there grows like 1 / (angle from
-  specular), integrable, so a cell's average grows as cells shrink (f2 of runs/vcavities_conductor.toml
-  at 3240 cells, benchmarks/vcavities_fig7.py). An independent numpy brute force of the
-  grooves shows the same (counts per 1-degree ring about specular flat in the ring's radius:
-  18065, 17906, 17591 of 2 M paths at 0-1, 1-2, 2-3 deg; Beckmann 0.8, theta_i = 30 deg), and
-  orders 1 and 2 of the tracer match it cell by cell.
+  specular), integrable, so a cell's average grows as cells shrink (f2 of
+  runs/vcavities_conductor.toml at 3240 cells, benchmarks/vcavities_fig7.py). An independent numpy
+  brute force of the grooves shows the same, and orders 1 and 2 of the tracer match it cell by
+  cell.
 
 Every resolved value is stored in the table's ``scene/`` attrs, with ``layout`` and ``intersector``.
+
+(measurements: docs/developer/performance.md, sections 'V-cavities: the order-2 caustic' and
+'One walk, estimators and dispatch (issue 25), 2026-12-02' for the intersectors' speeds)
 """
 
 from __future__ import annotations

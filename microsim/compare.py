@@ -1,4 +1,4 @@
-"""Model versus table, cell by cell (CONVENTIONS 2 and 7).
+"""Model versus table, cell by cell (docs/conventions.md §2 and §7).
 
 A table cell holds the cos(theta_o)-weighted average of the BRDF over the cell, so the model
 is averaged the same way, by Gauss quadrature over each cell (:meth:`Sensor.cell_quadrature`).
@@ -40,14 +40,14 @@ SIGNAL_TO_NOISE = 3.0
 #: --order choice -> row of the table's brdf_order (None: all orders, the table's brdf; BASE: the
 #: part of order 1 scattered by the base, brdf_order1_base, in tables of scenes with a base)
 BASE = "base"
-#: orders 1 and 2 together, brdf_orders12 (the f2 of interfaced_lambertian_microfacets.txt Sec. 3.3)
+#: orders 1 and 2 together, brdf_orders12 (the f2 of Meneveaux et al. 2015, Sec. 3.3)
 ORDERS12 = "orders12"
 ORDER_ROWS = {"all": None, "1": 0, "2": 1, "3": 2, "4+": 3, "1+2": ORDERS12, "1-base": BASE}
 
 
 @dataclass
 class Comparison:
-    """Model and simulation on the cells of a table, with the metrics of CONVENTIONS 7."""
+    """Model and simulation on the cells of a table, with the metrics of conventions §7."""
 
     model_name: str
     params: dict

@@ -1,4 +1,4 @@
-"""Run configs (CONVENTIONS 4): TOML in, validated pydantic models out, one-line errors.
+"""Run configs (docs/conventions.md §4): TOML in, validated pydantic models out, one-line errors.
 
 Every section is a strict pydantic model: unknown keys, wrong types and out-of-range values
 are rejected. Scene kinds come from the generator registry (``geometry.SCENES``) and material
@@ -9,6 +9,7 @@ whose message is one line naming the key and the accepted values.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 import types
@@ -70,7 +71,8 @@ class Illumination(Section):
 
 
 class SensorSection(Section):
-    cells: int = Field(3240, ge=1, le=1_000_000)
+    cells: int = Field(3240, ge=1, le=1_000_000, description="cells of the equal-solid-angle sensor, approximately "
+                       "(the table stores the actual cells)")
     retro_rings: int = Field(0, ge=0, le=100_000, description="rings about the retro direction, tallied "
                              "apart from the cells (0: none); see microsim.sensor")
     retro_max_deg: float = Field(10.0, gt=0.0, le=90.0, description="phase angle the retro rings reach, deg")
@@ -79,8 +81,10 @@ class SensorSection(Section):
 class Run(Section):
     paths: int = Field(ge=1, le=10**12, description="paths per incidence, over all realizations")
     realizations: int = Field(32, ge=2, le=100_000, description="independent geometry samples = batches of the standard errors")
-    seed: int = Field(1, ge=0, le=2**63 - 1)
-    max_order: int = Field(0, ge=0, le=1_000_000)
+    seed: int = Field(1, ge=0, le=2**63 - 1, description="random seed: of the geometry of each realization and of "
+                      "the paths of each unit")
+    max_order: int = Field(0, ge=0, le=1_000_000, description="the last scattering order traced (0: unlimited, "
+                           "Russian roulette; 1: single scattering)")
     backend: Literal[BACKEND_CHOICES] = Field(
         "auto", description="how Embree is called: direct (numba, native spheres, threads) or embreex; "
                             "auto = direct where its binding loads")
@@ -164,6 +168,55 @@ def validate(data: dict) -> Config:
     except ValueError as err:
         raise ConfigError(str(err)) from None
     return config
+
+
+@dataclasses.dataclass(frozen=True)
+class Key:
+    """One config key as the reference documents it: its dotted name, the scene or material kinds
+    that have it ("" for every one), what it accepts, its default, its meaning."""
+
+    name: str
+    kinds: str
+    accepted: str
+    default: str
+    doc: str
+
+
+def keys() -> list[Key]:
+    """Every key of a run's config, read from the schema (the same source as validation); the
+    keys of ``[sweep]``: :func:`microsim.sweep.keys`."""
+    out = [_key("name", Config, "name", ())]
+    for section, model in (("scene", Scene), ("material", AnyMaterial), ("base", AnyMaterial),
+                           ("illumination", Illumination), ("sensor", SensorSection), ("run", Run)):
+        members = _union_members(model) or [model]
+        kinds: dict[str, list[str]] = {}
+        for member in members:
+            for name in member.model_fields:
+                kinds.setdefault(name, []).append(_kind_of(member) if len(members) > 1 else "")
+        for name, having in kinds.items():
+            holders = [m for m in members if name in m.model_fields]
+            every = len(having) == len(members) or name == "kind"
+            key = _key(f"{section}.{name}", holders[0], name, () if every else having, members if name == "kind"
+                       else None)
+            defaults = [_key(key.name, m, name, ()).default for m in holders]
+            if len(set(defaults)) > 1:  # a default of each kind
+                key = dataclasses.replace(key, default="; ".join(f"{k}: {d}" for k, d in zip(having, defaults)))
+            out.append(key)
+    return out
+
+
+def _key(dotted: str, model, name: str, kinds, members=None) -> Key:
+    info = model.model_fields[name]
+    if members is not None:  # the kind: every member's tag
+        accepted = ", ".join(repr(_kind_of(m)) for m in members)
+    else:
+        accepted = _accepted(_field(model, name), {"loc": (name,)}).removeprefix("accepted: ")
+    if info.is_required():
+        default = "required"
+    else:
+        default = repr(info.default) if info.default is not None else "unset"
+    doc = info.description or ("the kind: which of the kinds named under accepted" if name == "kind" else "")
+    return Key(dotted, ", ".join(kinds), accepted, default, doc)
 
 
 def describe_error(error: dict, data: dict) -> str:

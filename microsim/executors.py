@@ -1,4 +1,4 @@
-"""Executors: where the units of a run are traced (CONVENTIONS 7, ``--executor``).
+"""Executors: where the units of a run are traced (docs/conventions.md §7, ``--executor``).
 
 An executor is a function ``execute(plan, units, emit, workers, scheduler)`` that traces the
 units (realization r, incidence i) it is given and calls ``emit(unit, tally, scene_info)`` in
@@ -160,19 +160,26 @@ def _trace_task(plan, units) -> list:
 
 
 def _start_fork_server() -> None:
-    """Start multiprocessing's fork server (once a process), ignoring SIGINT: the workers of a
-    local Dask cluster are forked from it, and take its SIGINT disposition (the server keeps
-    the one it started with for its children). A terminal's Ctrl-C goes to the whole process
-    group, and every worker printed a KeyboardInterrupt traceback (67 lines); the main process
-    alone decides, and closes the cluster. The server is started in milliseconds, the only
-    moment SIGINT is ignored here (:func:`interrupts.ignored_by_new_processes`). A fork server
-    that something else started first keeps its own disposition."""
-    from multiprocessing import forkserver
+    """Start multiprocessing's fork server (once a process) with SIGINT ignored in it and in
+    the workers of a local Dask cluster it forks (:mod:`microsim.forkserver_preload`, imported
+    first; the server starts with SIGINT blocked, as this thread has it meanwhile, so that a
+    Ctrl-C before that import waits and is discarded). A fork server that something else
+    started first keeps its own disposition.
+
+    This process's SIGINT is never ignored. It was, for the milliseconds the server took to
+    start, and a Ctrl-C then was lost (3 runs in 8 under load, the run going on to its end;
+    ``tests/test_signals.py``): the kernel hands a signal to any thread that does not block it
+    (Embree's, numba's). The resource tracker is started first: its start unblocks SIGINT in
+    this thread as it ends, which the server would inherit."""
+    from multiprocessing import forkserver, resource_tracker
 
     from distributed.utils import get_mp_context
 
     get_mp_context()  # distributed's list of modules the server imports once, for every worker
-    with interrupts.ignored_by_new_processes():
+    preload = [name for name in forkserver._forkserver._preload_modules if name != "microsim.forkserver_preload"]
+    forkserver.set_forkserver_preload(["microsim.forkserver_preload", *preload])
+    resource_tracker.ensure_running()
+    with interrupts.blocked_in_new_threads():
         forkserver.ensure_running()
 
 

@@ -1,10 +1,9 @@
-"""Model parameters fitted to a table (CONVENTIONS 7, ``microsim fit``): least squares on cell
-averages, weighted by variances predicted from the model (quasi-likelihood, iterated).
+"""Model parameters fitted to a table (docs/conventions.md §7, ``microsim fit``): least squares on
+cell averages, weighted by variances predicted from the model (quasi-likelihood, iterated).
 
 Weighting each cell by its own estimated standard error (Neyman's chi-square) biases a fit:
 a cell's error is estimated from the same paths as its value, and a cell that fluctuated low
-also gets a small error and a large weight. A plane of albedo 0.5 came out 5 standard errors
-low at 125 paths a cell (800 cells), and the bias fell as 1 / (paths per cell) (issue 24).
+also gets a small error and a large weight (a bias that grows as the paths per cell fall).
 Instead, the variance of cell C is taken from the model, v_C = k m_C / P_C, with m_C the
 model's cell average, P_C the cell's projected solid angle and k the incidence's dispersion of
 its paths (:func:`table_noise.variance_model`). Weights are held fixed while the parameters move,
@@ -20,16 +19,15 @@ its paths (a path exits into one cell, so they are anticorrelated) and, in a ran
 realizations (:func:`table_noise.path_covariance`, :func:`table_noise.realization_scale`). Taking
 the cells as independent overstates the error of what sums many cells: the albedo of a Lambertian
 plane is fixed by the energy its paths carry out, each exactly 0.5, and its fit is exact, where
-the error of independent cells read 2.6e-3 at 125 paths a cell (``tests/test_fit.py``).
+independent cells would give it an error.
 
 Every cell is fitted, the model averaged over each cell as ``compare`` does: with variances from
 the model, a cell's residual needs no error of its own, and choosing the cells by their own
-value biases the fit, as choosing them by their own error did. Fitting only the cells with
-signal (table > ``compare.SIGNAL_TO_NOISE`` standard errors, as compare reports them) put a
-plane's albedo +3.0 +- 0.25 standard errors high at 32 paths a cell (12 seeds; 0.5024 +- 0.0009
-for 0.5), an isotropic medium's +1.4 +- 0.3: near the threshold the cells kept are those that
-fluctuated up. The cells with signal only pool the paths' dispersion k (a ratio of sums), and an
-incidence without any is left out. The quadrature each cell needs is found once, at the starting
+value biases the fit, as choosing them by their own error did: fitting only the cells with
+signal (table > ``compare.SIGNAL_TO_NOISE`` standard errors, as compare reports them) biased the
+fit high, since near the threshold the cells kept are those that fluctuated up. The cells with
+signal only pool the paths' dispersion k (a ratio of sums), and an incidence without any is left
+out. The quadrature each cell needs is found once, at the starting
 parameters (``compare.refined_cell_averages``), and held fixed while the parameters move
 (``compare.CellRule``), so the residuals are smooth in them. Its tolerance is compare's
 (``QUADRATURE_TOLERANCE`` standard errors a cell) divided by the square root of the N cells
@@ -42,7 +40,10 @@ reports it whatever it is. Its degrees of freedom are the cells' expected shares
 less the free parameters: a cell whose model value m_C lies under the variance floor adds m_C /
 floor in expectation, not 1 (sum_C min(1, m_C / floor) - parameters; a dark cell counted whole
 sank an exact model's chi-square per degree of freedom far below 1). The best model is then
-compared with the table exactly as ``compare`` does."""
+compared with the table exactly as ``compare`` does.
+
+(measurements of the rejected weights, covariance and choice of cells: docs/developer/performance.md,
+section 'Fits and chi-square: weights, covariance and cells (issue 24)')"""
 
 from __future__ import annotations
 

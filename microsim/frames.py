@@ -1,4 +1,4 @@
-"""Directions in the frame of CONVENTIONS 1: normal +z, phi measured from +x towards +y."""
+"""Directions in the frame of docs/conventions.md §1: normal +z, phi measured from +x towards +y."""
 
 import numpy as np
 

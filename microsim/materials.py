@@ -2,8 +2,8 @@
 
 A material kind is defined once, as a config section below (Mitsuba 3's one plugin, one place):
 its ``kind`` name and parameters with their accepted ranges (the ``[material]`` / ``[base]``
-tables of CONVENTIONS 4, validated by :mod:`microsim.config`), its kind ``code``, its parameter
-row (the parameters in the order they are declared, and what the kernels derive from them once,
+tables of docs/conventions.md §4, validated by :mod:`microsim.config`), its kind ``code``, its
+parameter row (the parameters in the order they are declared, and what the kernels derive from them once,
 read by position) and its ``albedo_bound`` (used by generators for default slab depths).
 Defining a subclass registers it in ``MATERIALS`` (define kinds here: the config schema is built
 from the registry when :mod:`microsim.config` is imported); the config schema, the scene's
@@ -49,7 +49,7 @@ from .schema import Section
 #: kind name -> definition, in the order of definition
 MATERIALS: dict[str, type["Material"]] = {}
 
-#: most albedos of a Lambertian material traced together (CONVENTIONS 4)
+#: most albedos of a Lambertian material traced together (conventions §4)
 MAX_ALBEDOS = 16
 #: cap on the body bounces of one interfaced_lambert interaction; weight left is truncated
 MAX_BODY_BOUNCES = 256
@@ -153,7 +153,7 @@ ABSORBER = Absorber.code
 class Lambert(Material):
     """Lambertian reflector: cosine sampling about the shading normal, weight x albedo.
 
-    ``albedo`` may be a list (CONVENTIONS 4, every albedo from one run): the material scatters
+    ``albedo`` may be a list (conventions §4, every albedo from one run): the material scatters
     with the largest, and a run tallies each exit for every listed albedo
     (:class:`microsim.tally.Tally`)."""
 
@@ -228,7 +228,7 @@ CONDUCTOR = Conductor.code
 
 class InterfacedLambert(Material):
     """A smooth dielectric interface (index ratio ``eta``) over a Lambertian body of albedo
-    ``albedo``: the flat interfaced Lambertian of interfaced_lambertian_microfacets.txt, Eq. 8-10.
+    ``albedo``: the flat interfaced Lambertian of Meneveaux et al. 2015, Eq. 8-10.
     Fresnel reflection or refraction at the interface, then Lambertian bounces in the body with
     Fresnel (and total internal) reflection at the interface from inside until the light leaves.
     The whole excursion is one interaction."""
@@ -267,7 +267,7 @@ INTERFACED_LAMBERT = InterfacedLambert.code
 
 
 class Mirror(Material):
-    """The perfect conductor (CONVENTIONS 4): mirror reflection with F = 1 at every angle."""
+    """The perfect conductor (conventions §4): mirror reflection with F = 1 at every angle."""
 
     kind: Literal["mirror"]
     code: ClassVar[int] = 4
@@ -333,8 +333,8 @@ def _switch(method: str, arguments: str):
 
 @numba.njit(cache=True, error_model="numpy", _nrt=False)
 def _interfaced_lambert_body(albedo, eta, r_i, cos_i, cos_o):
-    """The body term of the flat interfaced Lambertian, interfaced_lambertian_microfacets.txt
-    Eq. 8 at m = n: K_d T(mu_i) T(mu_o) / (pi eta^2 (1 - K_d r_i)), T = 1 - F. It is what the
+    """The body term of the flat interfaced Lambertian, Meneveaux et al. 2015, Eq. 8 at
+    m = n: K_d T(mu_i) T(mu_o) / (pi eta^2 (1 - K_d r_i)), T = 1 - F. It is what the
     bounce-by-bounce sampler of :func:`_interfaced_lambert` gives on average: light enters with
     chance T(mu_i), each bounce multiplies the weight by K_d and leaves with chance 1 - r_i, in a
     direction of density T cos_t / pi inside, cos_t d(omega_t) = cos_o d(omega_o) / eta^2 out."""

@@ -2,7 +2,7 @@
 
 Each realization is one batch: an independent geometry sample, traced with an independent
 random stream for every incidence, with the same number of paths. Standard errors are the
-spread of the per-realization estimates divided by sqrt(realizations) (CONVENTIONS 2), so they
+spread of the per-realization estimates divided by sqrt(realizations) (docs/conventions.md §2), so they
 include the variance of the geometry, which is far from negligible on a finite tile.
 
 Work is cut into units (realization r, incidence i). The random stream of a unit is keyed by
@@ -49,7 +49,7 @@ class Plan:
     backend: str  # resolved run.backend: "direct" or "embreex"
     backend_note: str  # why "auto" fell back to embreex ("" otherwise)
     threads: int = 1
-    albedos: tuple = ()  # the material's albedos traced together (CONVENTIONS 4); () for one
+    albedos: tuple = ()  # the material's albedos traced together (conventions §4); () for one
     estimator_names: tuple = estimators.DEFAULT  # the run's estimators (microsim.estimators)
 
     @property
@@ -125,7 +125,7 @@ class PlanError(ValueError):
 
 
 def albedos_of(config) -> tuple:
-    """The albedos of a run of several (CONVENTIONS 4), () for a run of one; PlanError where a
+    """The albedos of a run of several (conventions §4), () for a run of one; PlanError where a
     list cannot be traced as one run: every interaction must be with the Lambertian material or
     absorb everything (microsim.tally.Tally)."""
     base = config.base
@@ -358,19 +358,28 @@ def run(config, workers: int = 1, threads: int = 1, progress=None, **options) ->
 
 def run_albedos(config, workers: int = 1, threads: int = 1, progress=None, executor: str = "local",
                 scheduler: str | None = None, store=None) -> list[Result]:
-    """Trace a validated config of one albedo or several (CONVENTIONS 4): one Result per albedo,
-    in the order of ``material.albedo``, from one set of paths traced at the largest.
+    """Trace a validated config of one albedo or several (conventions §4): one Result per albedo,
+    in the order of ``material.albedo``, from one set of paths traced at the largest. The plan is
+    made here and the memory checked (where the run traces on this machine), then :func:`trace`.
+    :func:`microsim.session.run` is the whole run of the command line (resume, sweeps, signals,
+    the table written). Raises PlanError (one line), and executors.WorkerFailed if a worker
+    raises or dies."""
+    plan = Plan.from_config(config, threads, workers)
+    if scheduler is None:  # on this machine (a cluster's workers are elsewhere)
+        check_memory(plan, plan.build_sensor(), workers, spawned=executor == "dask")
+    return trace(plan, workers, progress, executor, scheduler, store)
 
-    ``executor`` ("local" or "dask") traces on ``workers`` processes of ``threads`` threads each
-    (``scheduler``: the address of a Dask cluster's scheduler). ``store`` (a
+
+def trace(plan: Plan, workers: int = 1, progress=None, executor: str = "local", scheduler: str | None = None,
+          store=None) -> list[Result]:
+    """Trace a planned run (its memory checked by the caller): one Result per albedo.
+
+    ``executor`` ("local" or "dask") traces on ``workers`` processes of ``plan.threads`` threads
+    each (``scheduler``: the address of a Dask cluster's scheduler). ``store`` (a
     :class:`~microsim.unit_store.UnitStore`): its saved units are taken as they are, only the
     others are traced, and each new one is saved as it ends. ``progress(unit, paths, resumed)``
-    is called for every unit, saved ones first. Raises PlanError (one line), and
-    executors.WorkerFailed if a worker raises or dies."""
-    plan = Plan.from_config(config, threads, workers)
+    is called for every unit, saved ones first."""
     sensor = plan.build_sensor()
-    if scheduler is None:  # on this machine (a cluster's workers are elsewhere)
-        check_memory(plan, sensor, workers, spawned=executor == "dask")
     reducer = _Reducer(plan, sensor)
     saved = set(store.saved_units()) if store is not None else set()
     missing = [unit for unit in plan.units if unit not in saved]

@@ -1,4 +1,4 @@
-"""Base of every config section: strict types, no unknown keys (CONVENTIONS 4)."""
+"""Base of every config section: strict types, no unknown keys (docs/conventions.md §4)."""
 
 from pydantic import BaseModel, ConfigDict
 

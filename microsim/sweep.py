@@ -1,4 +1,4 @@
-"""Sweeps (CONVENTIONS 4): a ``[sweep]`` table turns one config into many.
+"""Sweeps (docs/conventions.md §4): a ``[sweep]`` table turns one config into many.
 
     [sweep]
     "scene.volume_fraction" = [0.1, 0.3]
@@ -91,6 +91,14 @@ def points(data: dict) -> list[Point] | None:
     if len(set(names)) != len(names):
         raise ConfigError("sweep: two points have the same values (a value is listed twice)")
     return out
+
+
+def keys() -> list[config_module.Key]:
+    """The keys of ``[sweep]``, as :func:`microsim.config.keys` documents a run's."""
+    return [config_module.Key("sweep.mode", "", ", ".join(map(repr, MODES)), repr(MODES[0]),
+                              "grid: every combination of the listed values; zip: the i-th values together"),
+            config_module.Key('sweep."section.key"', "", "a non-empty list of values of that key", "",
+                              "a dotted key of the config and the values it takes: one run (one table) a point")]
 
 
 def _text(value) -> str:

@@ -15,9 +15,8 @@ v_C = k' max(m_C, floor) / P_C + g m_C^2 (:func:`predicted_variance`), k' = k le
 the realizations, and the floor VARIANCE_FLOOR of the incidence's mean value (a model of zero
 in a cell with signal would otherwise weigh without limit). Weighing each cell by its own
 estimated error instead runs high at few paths a cell, as a cell that fluctuated low also gets
-a small error (issue 24: an exact model on an isotropic medium at 125 paths a cell had a mean
-z^2 of 1.07-1.17 over 8 seeds, where a Student t of the 31 realizations expects 1.069; with v_C,
-0.96-1.08).
+a small error (measurements: docs/developer/performance.md, section 'Fits and chi-square:
+weights, covariance and cells (issue 24)').
 
 Chi-square per cell of an exact model, (1/N) sum_C (m_C - f_C)^2 / v_C, is 1 in expectation.
 Its variance (:func:`chi2_bounds`) is [sum_C (1 - a_C)^2 (2 + kappa_C) + 4 sum_C a_C (1 - a_C)] /

@@ -1,28 +1,8 @@
-"""HDF5 reference tables (CONVENTIONS 6): atomic writer and a small reader.
+"""HDF5 reference tables (conventions §6): atomic writer and a checking reader.
 
-Layout (required by CONVENTIONS 6, plus extras marked +):
-
-    attrs: microsim_version, config_toml, created_utc, seed, wall_time_s, name,
-           + realizations, paths_per_realization, max_order, backend, backend_fallback
-    incidence/theta, incidence/phi                     (n_i,) radians
-    sensor/theta_lo, theta_hi, phi_lo, phi_hi          (n_c,) radians
-    sensor/direction (n_c, 3), sensor/solid_angle, sensor/projected_solid_angle (n_c,)
-    + sensor/ring_counts (n_rings,)
-    brdf, brdf_stderr                                  (n_i, n_c) 1/sr
-    brdf_order (n_i, 4, n_c), + brdf_order_stderr      orders 1, 2, 3, 4+
-    albedo, albedo_stderr (n_i,), + albedo_order, albedo_order_stderr (n_i, 4)
-    brdf_order1_base, albedo_order1_base (+ _stderr)   scenes with a base: order 1 from the base
-    + brdf_orders12, albedo_orders12 (+ _stderr)       orders 1 and 2 together (the paper's f2,
-                                                       interfaced_lambertian_microfacets.txt 3.3)
-    energy/transmitted, energy/truncated, + energy/absorbed, + */..._stderr (n_i,)
-    + energy/balance: albedo + transmitted + truncated + absorbed, 1 in expectation
-    paths (n_i,)
-    scene/ attrs: resolved scene parameters, largest triangle count;
-    + scene/<count> (R,): what each realization generated (spheres, images, triangles, ...)
-    + diagnostics/segments, inside_hits, roulette_kills (n_i,)
-    + with [sensor] retro_rings: sensor/retro_gamma_lo, retro_gamma_hi (n_r,) phase-angle bounds of
-      the retro rings (radians), sensor/retro_projected_solid_angle (n_i, n_r) about each
-      incidence; brdf_retro (n_i, n_r) and brdf_retro_order (n_i, 4, n_r) (+ _stderr), 1/sr
+The layout (every attribute and dataset, its axes, unit and meaning) is declared in
+:mod:`microsim.table_layout`, from which the loader's checks below and the documentation's
+table-format page are derived.
 
 Every dataset carries a Fletcher-32 checksum and the file is written in the HDF5 1.10 format,
 whose metadata (headers, chunk indexes) carry checksums too, so damaged bytes fail on reading.
@@ -46,7 +26,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from . import __version__
+from . import __version__, table_layout
 from .frames import direction
 from .orders import ORDERS
 from .sensor import Sensor
@@ -109,6 +89,7 @@ def write(path: str | Path, result, config, overwrite: bool = False) -> Path:
     plan, sensor = result.plan, result.sensor
     try:
         with h5py.File(tmp, "w", libver=("v110", "v110")) as h5:
+            h5.attrs["format_version"] = table_layout.FORMAT_VERSION
             h5.attrs["microsim_version"] = __version__
             h5.attrs["config_toml"] = config_to_toml(config)
             h5.attrs["created_utc"] = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
@@ -120,7 +101,7 @@ def write(path: str | Path, result, config, overwrite: bool = False) -> Path:
             h5.attrs["max_order"] = config.run.max_order
             h5.attrs["backend"] = plan.backend
             h5.attrs["backend_fallback"] = plan.backend_note
-            if plan.albedos:  # one table of a run of several albedos (CONVENTIONS 4)
+            if plan.albedos:  # one table of a run of several albedos (conventions §4)
                 h5.attrs["albedos_traced_together"] = np.array(plan.albedos)
                 h5.attrs["albedo_traced"] = max(plan.albedos)
             _store(h5, "incidence/theta", plan.theta_i)
@@ -230,36 +211,11 @@ class TableError(ValueError):
     """A damaged, incomplete or inconsistent table; the message is one line naming the dataset."""
 
 
-#: axes of every dataset whose shape is known, by HDF5 path
-AXES = {
-    **{f"incidence/{name}": ("incidences",) for name in ("theta", "phi")},
-    **{f"sensor/{name}": ("cells",)
-       for name in ("theta_lo", "theta_hi", "phi_lo", "phi_hi", "solid_angle", "projected_solid_angle")},
-    "sensor/direction": ("cells", "xyz"),
-    **{name: ("incidences", "cells")
-       for name in ("brdf", "brdf_stderr", "brdf_order1_base", "brdf_order1_base_stderr", "brdf_orders12",
-                    "brdf_orders12_stderr")},
-    **{name: ("incidences", "orders", "cells") for name in ("brdf_order", "brdf_order_stderr")},
-    **{f"sensor/{name}": ("retro_rings",) for name in ("retro_gamma_lo", "retro_gamma_hi")},
-    **{name: ("incidences", "retro_rings") for name in ("sensor/retro_projected_solid_angle", "brdf_retro",
-                                                        "brdf_retro_stderr")},
-    **{name: ("incidences", "orders", "retro_rings") for name in ("brdf_retro_order", "brdf_retro_order_stderr")},
-    **{name: ("incidences",)
-       for name in ("albedo", "albedo_stderr", "albedo_order1_base", "albedo_order1_base_stderr", "albedo_orders12",
-                    "albedo_orders12_stderr", "paths")},
-    **{name: ("incidences", "orders") for name in ("albedo_order", "albedo_order_stderr")},
-    **{f"energy/{name}{suffix}": ("incidences",) for name in (*ENERGY_NAMES, "balance") for suffix in ("", "_stderr")},
-    **{f"diagnostics/{name}": ("incidences",) for name in COUNT_NAMES},
-}
-#: datasets every table has: those of CONVENTIONS 6 (brdf_order1_base only where there is a base,
-#: so it is checked when present), the ring counts the sensor is rebuilt from, and the per-order
-#: errors and albedos ``compare --order`` reads (every table :func:`write` made has them)
-REQUIRED = (
-    "incidence/theta", "incidence/phi", "sensor/theta_lo", "sensor/theta_hi", "sensor/phi_lo", "sensor/phi_hi",
-    "sensor/direction", "sensor/solid_angle", "sensor/projected_solid_angle", "sensor/ring_counts",
-    "brdf", "brdf_stderr", "brdf_order", "brdf_order_stderr", "albedo", "albedo_stderr", "albedo_order",
-    "albedo_order_stderr", "energy/transmitted", "energy/truncated", "paths",
-)
+#: axes of every dataset whose shape is known, by HDF5 path (microsim.table_layout)
+AXES = {d.name: d.axes for d in table_layout.datasets() if d.axes is not None}
+#: datasets every table has (microsim.table_layout): brdf_order1_base only where there is a base,
+#: so it is checked when present
+REQUIRED = tuple(d.name for d in table_layout.datasets() if d.required)
 
 
 def load(path: str | Path) -> Table:

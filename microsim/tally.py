@@ -20,7 +20,7 @@ SINGLE_ALBEDO = np.ones(1)
 #: has several albedos) and the event counts (COUNT_NAMES) of the row.
 #: Paths are traced at the largest albedo c_max; a weight w after k interactions counts
 #: w (c_j / c_max)^k for albedo j (``albedo_scale``), which is exact where every interaction is
-#: with one Lambertian material of albedo c_max or absorbs everything (CONVENTIONS 4).
+#: with one Lambertian material of albedo c_max or absorbs everything (conventions §4).
 Tally = namedtuple("Tally", ["paths", "row", "estimates", "energy", "counts", "albedo_scale"])
 
 #: indices of ``Tally.energy``

@@ -1,5 +1,5 @@
 """Finished units of a run kept on disk, so that a run stopped by a crash, ``kill -9`` or a signal
-resumes where it stopped (``microsim run --resume``, CONVENTIONS 7).
+resumes where it stopped (``microsim run --resume``, docs/conventions.md §7).
 
 A run's units (realization x incidence, :attr:`microsim.runner.Plan.units`) are saved one file
 each, as they end, in the directory ``<table>.partial`` beside the table: the unit's tally

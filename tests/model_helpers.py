@@ -18,7 +18,7 @@ def random_pairs(n, seed, top=89.9):
 
 
 def assert_rejected(name, params, keys):
-    """``models.create(name, **params)`` raises ValueError naming every key (CONVENTIONS 9)."""
+    """``models.create(name, **params)`` raises ValueError naming every key (conventions §9)."""
     with pytest.raises(ValueError) as err:
         models.create(name, **params)
     for key in keys:
@@ -26,5 +26,5 @@ def assert_rejected(name, params, keys):
 
 
 def assert_zero_below_horizon(model, above, below):
-    """f = 0 when either direction is below the horizon, both ways round (CONVENTIONS 8)."""
+    """f = 0 when either direction is below the horizon, both ways round (conventions §8)."""
     assert model(below, above) == 0.0 and model(above, below) == 0.0

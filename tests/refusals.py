@@ -1,4 +1,4 @@
-"""Bad input (CONVENTIONS 9): a config that `microsim run` must refuse in one line, exit 2, writing nothing."""
+"""Bad input (docs/conventions.md §9): a config that `microsim run` must refuse in one line, exit 2, writing nothing."""
 
 from microsim.cli import main
 

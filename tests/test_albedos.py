@@ -1,5 +1,5 @@
-"""Every albedo from one run (issue 12, item d; CONVENTIONS 4): paths traced once at the largest
-albedo, each exit tallied for every listed albedo with its weight times (c_j / c_max)^k.
+"""Every albedo from one run (issue 12, item d; docs/conventions.md §4): paths traced once at the
+largest albedo, each exit tallied for every listed albedo with its weight times (c_j / c_max)^k.
 
 A run of several albedos is judged against separate runs of one albedo each, made with another
 seed (independent): the mean over cells of z^2 = (a - b)^2 / (se_a^2 + se_b^2) within the

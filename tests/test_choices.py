@@ -14,3 +14,12 @@ def test_every_backend_named_is_implemented_and_no_other():
 
 def test_every_executor_named_is_implemented_and_no_other():
     assert tuple(runner.EXECUTORS) == choices.EXECUTORS
+
+
+def test_the_command_line_offers_exactly_these():
+    """``--backend`` and ``--executor`` take their choices from microsim.choices."""
+    from microsim import cli
+
+    options = {param.name: param for param in cli.run.params}
+    assert tuple(options["backend"].type.choices) == choices.BACKEND_CHOICES
+    assert tuple(options["executor"].type.choices) == choices.EXECUTORS

@@ -214,14 +214,14 @@ def test_a_table_that_appears_while_the_run_traces_is_not_replaced(tmp_path, cap
     config = tmp_path / "small.toml"
     config.write_text(SPHERES.replace("paths = 20_000", "paths = 400"))
     out = tmp_path / "t.h5"
-    real_run = runner.run_albedos
+    real_run = runner.trace
 
     def run_while_someone_writes_out(*args, **kwargs):
         results = real_run(*args, **kwargs)
         out.write_bytes(b"written meanwhile")
         return results
 
-    monkeypatch.setattr(runner, "run_albedos", run_while_someone_writes_out)
+    monkeypatch.setattr(runner, "trace", run_while_someone_writes_out)
     assert main(["run", str(config), "--out", str(out)]) == 2
     err = capsys.readouterr().err.splitlines()
     kept = tmp_path / f"t.{os.getpid()}.h5"

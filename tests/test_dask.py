@@ -139,9 +139,3 @@ def test_a_lost_cluster_ends_the_run_in_one_line_keeping_its_units(tmp_path):
     assert lines[0].endswith(f"; {kept} of 32 units kept in {unit_store.store_path(out)} (rerun with --resume to "
                              "finish)") and kept >= 2
     assert not out.exists()
-
-
-def test_the_command_line_offers_every_executor_the_runner_has():
-    from microsim import cli
-
-    assert cli.EXECUTORS == tuple(runner.EXECUTORS)

@@ -2,7 +2,7 @@
 class is the one called, and a write it makes is seen by the code after it.
 
 numba 0.68's ``overload(inline="always")`` loses that write when an inlined function with an
-early return follows (docs/performance.md): Generic compiles implementations as calls instead.
+early return follows (docs/developer/performance.md): Generic compiles implementations as calls instead.
 """
 
 from typing import NamedTuple

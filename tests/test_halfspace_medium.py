@@ -91,7 +91,7 @@ def test_scattering_cosines_follow_the_phase_function(phase, cdf):
                                      ("isotropic", lambda mu: np.full(np.shape(mu), 1.0 / (4.0 * math.pi)))])
 @pytest.mark.slow
 def test_order_1_is_the_single_scattering_of_eq_10(phase, p):
-    """Order 1 = c p(-wi.wo) / (mu_i + mu_o) (lambert_sphere_brdf.txt Eq. 10), every cell."""
+    """Order 1 = c p(-wi.wo) / (mu_i + mu_o) (d'Eon 2021, Eq. 10), every cell."""
     result = runner.run(medium_config(0.8, phase))
     assert_matches(result, 0, lambda wi, wo: single_scattering(wi, wo, 0.8, p))
 

@@ -39,8 +39,8 @@ def test_interfaced_lambert_at_eta_1_is_lambertian(simulate):
 
 
 def test_interfaced_lambert_diffuse_albedo_matches_the_flat_closed_form(simulate):
-    """Directional albedo of a smooth dielectric over a Lambertian body (interfaced_lambertian
-    _microfacets.txt, Eq. 8-10): F(mu_i) + (1 - F(mu_i)) K (1 - r_i) / (1 - K r_i), with r_i the
+    """Directional albedo of a smooth dielectric over a Lambertian body (Meneveaux et al. 2015,
+    Eq. 8-10): F(mu_i) + (1 - F(mu_i)) K (1 - r_i) / (1 - K r_i), with r_i the
     hemispherical reflectance of the interface seen from inside (quadrature here)."""
     eta, kd = 1.5, 0.7
     mu, w = np.polynomial.legendre.leggauss(400)

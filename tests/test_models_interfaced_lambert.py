@@ -1,4 +1,4 @@
-"""Interfaced Lambertian microfacets (interfaced_lambertian_microfacets.txt): flat and rough forms."""
+"""Interfaced Lambertian microfacets (Meneveaux et al. 2015): flat and rough forms."""
 
 import math
 

@@ -1,7 +1,7 @@
 """Lambert-sphere models, phase function, samplers, H-functions and the Horak-Chandrasekhar constants.
 
-Paper: lambert_sphere_brdf.txt. Independent references used here: numerical projection of the
-phase function, the exact CDF of Eq. 1, Chandrasekhar's iteration for H, a discrete-ordinate
+Paper: d'Eon 2021 (Lambert-sphere BRDF). Independent references used here: numerical projection of
+the phase function, the exact CDF of Eq. 1, Chandrasekhar's iteration for H, a discrete-ordinate
 solution of the transfer equation, energy conservation at c = 1 and the single-scattering limit.
 """
 
@@ -387,7 +387,7 @@ def test_fast_variant_albedo_bounded_up_to_its_limit():
 
 def test_fast_variant_azimuth_convention():
     # Eq. 41's |phi| measured from the backscatter half plane is closer to the exact model than
-    # |phi| measured from the forward one: the paper's phi = 0 is backscatter, as in CONVENTIONS.
+    # |phi| measured from the forward one: the paper's phi = 0 is backscatter, as in conventions §1.
     wo, weight = hemisphere_rule(24, 48)
     c = 0.6
     exact = models.create("lambert_sphere", albedo=c, method="exact")

@@ -58,7 +58,7 @@ def smith_case(case):
 
 @pytest.mark.parametrize("tau0, beta_x, beta_y", [(1e-4, 1.0, 1.0), (0.3, 0.5, 2.0), (0.9999, 1e-3, 1e3)])
 def test_grain_density_gives_the_filling_factor(tau0, beta_x, beta_y):
-    """tau0 = 1 - exp(-rho pi / (beta_x beta_y)) (Eq. 8, CONVENTIONS 5.3) at rho = grain_density,
+    """tau0 = 1 - exp(-rho pi / (beta_x beta_y)) (Eq. 8, conventions §5.3) at rho = grain_density,
     and lambda = pi rho in unit space (beta_x = beta_y = 1)."""
     rho = grain_density(tau0, beta_x, beta_y)
     assert -math.expm1(-rho * math.pi / (beta_x * beta_y)) == pytest.approx(tau0, rel=1e-12)
@@ -112,7 +112,7 @@ def _ray_is_free(h, dx, dy, dz, cx, cy, n, bx2, by2):
 def _poisson_visibility(seed, n_void, tau0, beta_x, beta_y, h, d1, d2):
     """Counts (free, void, tried) for points (0, 0, h) among fresh Poisson grain layers.
 
-    Grains: centres Poisson with density rho = grain_density(tau0, beta_x, beta_y) (CONVENTIONS 5.3)
+    Grains: centres Poisson with density rho = grain_density(tau0, beta_x, beta_y) (conventions §5.3)
     in the box of every centre whose grain can contain the point or meet either ray below
     z = 1. A point inside a grain is rejected (G^dist is conditioned on the void, Eq. 16).
     """

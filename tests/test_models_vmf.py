@@ -1,4 +1,4 @@
-"""The vMF diffuse BRDF (vmf_diffuse_brdf.txt): limits, cross section, Fourier convention, energy."""
+"""The vMF diffuse BRDF (d'Eon and Weidlich 2024): limits, cross section, Fourier convention, energy."""
 
 import math
 

@@ -45,6 +45,19 @@ def wait_for_units(process, out: Path, count: int, seconds: float = 120) -> None
         time.sleep(0.01)
 
 
+def kill_at_half(process, out: Path) -> None:
+    """SIGKILL the run writing ``out`` once it kept half its units; its workers die with it
+    (PR_SET_PDEATHSIG), so nothing more is saved."""
+    try:
+        wait_for_units(process, out, UNITS // 2)
+        process.send_signal(signal.SIGKILL)
+        assert process.wait(timeout=10) == -signal.SIGKILL
+    finally:
+        process.kill()
+    assert not out.exists()
+    time.sleep(0.5)
+
+
 @pytest.fixture(scope="module")
 def uninterrupted(tmp_path_factory):
     """The table of the run traced at once (on 2 workers: bit-identical to 1, test_cli_run)."""
@@ -74,15 +87,7 @@ def test_a_run_killed_at_half_its_units_resumes_bit_identical(tmp_path, uninterr
     config = tmp_path / "run.toml"
     config.write_text(RUN)
     out = tmp_path / "killed.h5"
-    process = start(config, out, "--workers", "2")
-    try:
-        wait_for_units(process, out, UNITS // 2)
-        process.send_signal(signal.SIGKILL)
-        assert process.wait(timeout=10) == -signal.SIGKILL
-    finally:
-        process.kill()
-    assert not out.exists()
-    time.sleep(0.5)  # the workers die with their parent (PR_SET_PDEATHSIG): nothing more is saved
+    kill_at_half(start(config, out, "--workers", "2"), out)
     resumed, traced = resume(config, out, capsys)
     assert UNITS // 2 <= resumed < UNITS and resumed + traced == UNITS
     assert same_table(out, uninterrupted)
@@ -162,31 +167,34 @@ def test_progress_counts_resumed_units_as_done_and_times_only_the_traced(tmp_pat
     (issue 24, defect 14), and the line says so while numba compiles."""
     from types import SimpleNamespace
 
-    from microsim import cli
+    from microsim import progress as progress_module
 
     path = tmp_path / "run.toml"
     path.write_text(RUN)
     plan = runner.Plan.from_config(config_module.load(path))
     clock = [100.0]
-    monkeypatch.setattr(cli, "time", SimpleNamespace(monotonic=lambda: clock[0]))
+    monkeypatch.setattr(progress_module, "time", SimpleNamespace(monotonic=lambda: clock[0]))
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)
     watch = SimpleNamespace(seconds=0.0)
-    progress = cli._Progress(plan, compile_seconds=20)
-    with progress:
+    progress = progress_module.ProgressBar()
+    progress.start(plan, compile_seconds=20)
+    try:
         progress.compiling()
         task = progress.bar.tasks[0]
         assert (task.description, task.fields["status"]) == ("compiling", "the tracer, for this machine (once; about 20 s)")
-        progress.begin(watch)
+        progress.tracing(watch)
         for unit in plan.units[:3]:
-            progress.advance(unit, plan.paths_per_realization, True)
+            progress.unit(unit, plan.paths_per_realization, True)
         assert task.fields["status"].endswith("starting")  # no rate from resumed units
         clock[0] += 30.0  # the first traced unit carries the start: not in the rate
-        progress.advance(plan.units[3], plan.paths_per_realization, False)
+        progress.unit(plan.units[3], plan.paths_per_realization, False)
         assert task.fields["status"].endswith("starting")
         clock[0] += 2.0 + 7.0  # the next unit traced in 2 s, and 7 s of compiling meanwhile
         watch.seconds = 7.0
-        progress.advance(plan.units[4], plan.paths_per_realization, False)
+        progress.unit(plan.units[4], plan.paths_per_realization, False)
         status = task.fields["status"]
+    finally:
+        progress.stop()
     assert task.description == "tracing"
     assert status == (f"5/{UNITS} units, {5 * plan.paths_per_realization // 2:,} of {plan.paths:,} paths per "
                       f"incidence, {2.0 * (UNITS - 5):.0f} s left")
@@ -250,12 +258,12 @@ def test_damaged_unit_files_are_traced_again(tmp_path, capsys):
 def test_a_signal_while_the_tables_are_written_waits_for_them():
     """Once tracing is over a signal no longer interrupts: the tables are written and the store
     cleared first, then the run stops saying so (the message must not claim no table)."""
-    from microsim import cli
+    from microsim import interrupts
 
     events = []
-    with pytest.raises(cli.Stopped) as stopped:
-        with cli._stop_on_signals() as hold:
-            with hold():
+    with pytest.raises(interrupts.Stopped) as stopped:
+        with interrupts.StopOnSignals() as guard:
+            with guard.hold():
                 os.kill(os.getpid(), signal.SIGTERM)
                 time.sleep(0.05)  # the handler runs here, and must not raise
                 events.append("tables written")

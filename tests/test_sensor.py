@@ -1,4 +1,4 @@
-"""The sensor of CONVENTIONS 3: equal solid angles, exact cover, near-square cells, O(1) lookup."""
+"""The sensor of docs/conventions.md §3: equal solid angles, exact cover, near-square cells, O(1) lookup."""
 
 import numpy as np
 import pytest

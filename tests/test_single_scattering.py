@@ -2,7 +2,7 @@
 
 Acceptance d of issue 2 asks the order-1 table (max_order = 1, albedo 0.9) to match the exact
 single scattering of a half space of Lambert-sphere point scatterers,
-c p(-wi.wo) / (mu_i + mu_o) (lambert_sphere_brdf.txt, Eqs. 1 and 10), with median |rel| <= 3 %
+c p(-wi.wo) / (mu_i + mu_o) (d'Eon 2021, Eqs. 1 and 10), with median |rel| <= 3 %
 on cells more than 10 deg from retro, at phi = 0.02.
 
 Spheres of finite size are brighter than point scatterers at first order in r / l
@@ -41,7 +41,7 @@ def single_scattering_table(simulate, phi):
 
 
 def point_scatterers(sensor, wi):
-    """c p(-wi.wo) / (mu_i + mu_o), Eq. 10, averaged over each cell (CONVENTIONS 2)."""
+    """c p(-wi.wo) / (mu_i + mu_o), Eq. 10, averaged over each cell (conventions §2)."""
     return sensor.cell_average(lambda wo: single_scattering(wi, wo, ALBEDO), 6, 6)
 
 

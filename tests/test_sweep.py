@@ -1,5 +1,5 @@
-"""Sweeps (CONVENTIONS 4, microsim/sweep.py): one table per point, each the same as the point run
-alone, bit for bit; an index; bad sweeps refused in one line before anything is written."""
+"""Sweeps (docs/conventions.md §4, microsim/sweep.py): one table per point, each the same as the
+point run alone, bit for bit; an index; bad sweeps refused in one line before anything is written."""
 
 import csv
 

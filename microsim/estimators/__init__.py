@@ -43,6 +43,8 @@ class Estimator:
     name: ClassVar[str]
     #: the NamedTuple class of its tally fields (the kernels' hooks are registered on it)
     Record: ClassVar[type]
+    #: the datasets it writes (microsim.table_layout.Dataset): the table's declared layout
+    DATASETS: ClassVar[tuple] = ()
 
     def __init__(self, sensor, plan=None):
         self.sensor, self.plan = sensor, plan

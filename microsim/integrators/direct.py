@@ -7,7 +7,7 @@ kernels of :mod:`.surface_transport`), with no Python between segments: two path
 a slot whose path ends takes the chunk's next path (:func:`trace_chunk`). All threads share one
 committed Embree scene. Memory is one scene per process, a few hundred bytes per path row, and
 the tallies of one wave. Why two slots, chunks of 8192 paths, and the designs measured against
-this kernel: docs/performance.md.
+this kernel: docs/developer/performance.md.
 """
 
 from __future__ import annotations

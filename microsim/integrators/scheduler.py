@@ -12,7 +12,7 @@ for any thread count.
 
 Python threads rather than a numba ``prange``: numba's parallel loops take no tuples of arrays
 (the named bundles), and its OpenMP layer is not fork-safe (the runner forks worker processes
-after compiling). Chunk and wave sizes, and what they cost: docs/performance.md.
+after compiling). Chunk and wave sizes, and what they cost: docs/developer/performance.md.
 """
 
 from __future__ import annotations

@@ -36,14 +36,16 @@ traces the chunks of a scheduler's share (:mod:`.scheduler`) with it: the V-cavi
 integrators. The surface integrator drives the same :func:`take_event` from its two Embree
 backends, whose loops are not one path at a time: :mod:`.direct` interleaves two paths so that
 the processor overlaps their work, :mod:`.embreex` advances every live path a segment per
-embreex call (why each: docs/performance.md).
+embreex call (why each: their module docstrings).
 
 The transport's functions are arguments, and every function here is inlined by numba: an
 integrator's kernel names its own functions (module globals), so numba inlines them where
-they are called, and the walk runs the machine code of a loop written for that integrator
-(measured against the loops it replaced: docs/performance.md). Dispatch by the world's type
-(:mod:`microsim.dispatch`) compiles each function apart, and cost the V-cavities 30 % of their
-speed.
+they are called, and the walk runs the machine code of a loop written for that integrator.
+Dispatch by the world's type (:mod:`microsim.dispatch`) was rejected here: it compiles each
+function apart, and the calls cost the V-cavities 30 % of their speed.
+
+(measurements against the loops this walk replaced, and of the rejected designs:
+docs/developer/performance.md, section 'One walk, estimators and dispatch (issue 25), 2026-12-02')
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Analytic BRDF models behind one API (CONVENTIONS 8).
+"""Analytic BRDF models behind one API (docs/conventions.md §8).
 
     from microsim import models
     m = models.create("lambert_sphere", albedo=0.8)
@@ -12,11 +12,11 @@ manner of Mitsuba 3).
 import importlib
 import pkgutil
 
-from .base import BRDFModel, Param, available, create, get, register
+from .base import BRDFModel, Param, available, create, get, listing, register
 from .user_models import FunctionModel, UserModelError, as_model, model_class
 
 for _module in pkgutil.iter_modules(__path__):
     importlib.import_module(f"{__name__}.{_module.name}")
 
 __all__ = ["BRDFModel", "FunctionModel", "Param", "UserModelError", "as_model", "available", "create", "get",
-           "model_class", "register"]
+           "listing", "model_class", "register"]

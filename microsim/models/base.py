@@ -1,4 +1,4 @@
-"""The model API of CONVENTIONS 8: parameters with declared domains, and the registry.
+"""The model API of docs/conventions.md §8: parameters with declared domains, and the registry.
 
 A model is a class with a ``name``, a tuple of :class:`Param`, a paper ``reference`` and an
 ``_eval(wi, wo)`` that receives only pairs of directions both above the horizon, as float64
@@ -175,6 +175,25 @@ def get(name: str) -> type[BRDFModel]:
         raise ValueError(f"unknown model {name!r}; accepted: {', '.join(available())}") from None
 
 
+def listing(names=None) -> list[str]:
+    """The lines ``microsim models`` prints for the models ``names`` (default: every one): the
+    name and reference, a note if not reciprocal, then each parameter, its accepted values, its
+    default and its meaning, in aligned columns."""
+    names = available() if names is None else list(names)
+    classes = [get(name) for name in names]
+    rows = [(p.name, p.describe(), p.default_text()) for cls in classes for p in cls.params]
+    widths = [max((len(row[k]) for row in rows), default=0) for k in range(3)]
+    lines = []
+    for name, cls in zip(names, classes):
+        lines.append(f"{name}: {cls.reference}")
+        if not cls.reciprocal:
+            lines.append(f"    (not reciprocal: {cls.nonreciprocal_reason})")
+        for p in cls.params:
+            cells = (p.name, p.describe(), p.default_text())
+            lines.append("    " + "  ".join(f"{c:<{w}}" for c, w in zip(cells, widths)) + f"  {p.doc}")
+    return lines
+
+
 def create(name: str, **values) -> BRDFModel:
-    """Build a model by name with parameters by name (CONVENTIONS 8)."""
+    """Build a model by name with parameters by name (conventions §8)."""
     return get(name)(**values)

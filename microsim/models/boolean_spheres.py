@@ -1,9 +1,9 @@
 """Single scattering of a Boolean suspension of Lambertian spheres, with its finite-size terms.
 
 The radiative-transfer limit is the Lambert-sphere half space, f1 = c p(-wi.wo) / (mu_i + mu_o)
-(lambert_sphere_brdf.txt, Eqs. 1 and 10): point scatterers, independent of the density. Real
-spheres of radius r in a Boolean model (CONVENTIONS 5.2, free path l) differ from it at first
-order in r / l in two ways, and this model keeps both:
+(d'Eon 2021, Eqs. 1 and 10): point scatterers, independent of the density. Real spheres of
+radius r in a Boolean model (docs/conventions.md §5.2, free path l) differ from it at first order
+in r / l in two ways, and this model keeps both:
 
     f = c p(-wi.wo) / (mu_i + mu_o) * (I + k (r / l) M),    k = 1/mu_i + 1/mu_o.
 
@@ -229,8 +229,9 @@ class BooleanSpheresSingle(BRDFModel):
         Param("volume_fraction", "phi of the Boolean model (first order in r / l = -3/4 ln(1 - phi))",
               None, 0.0, 0.1, lo_open=True),
     )
-    reference = ("single scattering only (compare with --order 1): lambert_sphere_brdf.txt Eqs. 1, 10 "
-                 "times the shadow-hiding and finite-size terms derived in microsim/models/boolean_spheres.py")
+    reference = ("single scattering only (compare with --order 1): d'Eon 2021 (Lambert-sphere BRDF), "
+                 "Eqs. 1, 10 times the shadow-hiding and finite-size terms derived in "
+                 "microsim/models/boolean_spheres.py")
 
     def setup(self) -> None:
         self.r_over_l = radius_over_free_path(self.volume_fraction)

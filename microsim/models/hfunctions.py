@@ -1,21 +1,22 @@
 """H-functions of the Lambert-sphere half space and the exact Horak-Chandrasekhar constants.
 
-Paper: lambert_sphere_brdf.txt (d'Eon), Eqs. 13-20 and 22, 30, 32-33; the exact solution of
-Horak & Chandrasekhar 1961 (ApJ 134, 45) for the three-term phase function of Eq. 8,
-``c p = w0 + w1 P1 + w2 P2`` with ``w0 = c, w1 = -4c/3, w2 = 5c/16``.
+Paper: d'Eon 2021 (Lambert-sphere BRDF; docs/reference/papers.md), Eqs. 13-20 and 22, 30, 32-33;
+the exact solution of Horak & Chandrasekhar 1961 (ApJ 134, 45) for the three-term phase function
+of Eq. 8, ``c p = w0 + w1 P1 + w2 P2`` with ``w0 = c, w1 = -4c/3, w2 = 5c/16``.
 
 Numerics
 --------
 * ``dispersion`` is K^(i)(t) of Eq. 17. It is evaluated as ``K(0) + 2 t^2 sum_k p_k J_{k+1}(t)``
   with ``J_k(t) = int_0^1 x^2k / (1 + t^2 x^2) dx`` (a power series for t < 1/2, the upward
   recurrence from ``atan(t)/t`` above). The closed forms Eqs. 18-20 are the same function
-  (checked to 1e-12 for t >= 0.5 in the tests) but cancel catastrophically for small t, and the subtracted
-  form keeps K relatively accurate even where K(0) = 0 (mode 0 at c = 1, the conservative case).
+  (checked to 1e-12 for t >= 0.5 in the tests) but cancel catastrophically for small t, and the
+  subtracted form keeps K relatively accurate even where K(0) = 0 (mode 0 at c = 1, the
+  conservative case).
 * ``h_function`` is the Fock formula Eq. 16, rewritten with t = e^s as
   ``ln H(mu) = -(1/pi) int ln K(e^s) / (2 cosh(s + ln mu)) ds`` and integrated by the
   trapezoidal rule (step 1/4, window +-40 around s = -ln mu). The integrand is analytic in the
-  strip |Im s| < pi/2, so the rule converges geometrically (error ~ exp(-pi^2 / h) ~ 1e-17);
-  halving the step changes H by < 2e-15 (modes 0-2, c = 0, 0.1, ..., 1, mu in [0, 1]).
+  strip |Im s| < pi/2, so the rule converges geometrically (error ~ exp(-pi^2 / h) ~ 1e-17;
+  measured: docs/developer/performance.md, section 'H-functions: step of the Fock quadrature').
 * ``h_function_iterated`` solves Chandrasekhar's nonlinear integral equation
   ``H(mu) = 1 + mu H(mu) int_0^1 Psi(mu') H(mu') / (mu + mu') dmu'`` by fixed-point iteration on a
   graded Gauss rule: an independent method used to check ``h_function``.

@@ -1,7 +1,7 @@
 """Interfaced Lambertian microfacets: a Lambertian body (albedo K_d) under a dielectric interface.
 
-interfaced_lambertian_microfacets.txt (Meneveaux et al.), with n_i = ``eta`` and
-K_d = ``albedo``:
+Paper: Meneveaux et al. 2015 (interfaced Lambertian microfacets; docs/reference/papers.md), whose
+equation numbers are cited below, with n_i = ``eta`` and K_d = ``albedo``:
 
 - flat (``roughness`` = 0): body reflection, Eq. 8 taken at m = n,
   f_b = K_d T(mu_i) T(mu_o) / (pi n_i^2 (1 - K_d r_i)), T = 1 - F (Eq. 7), with the internal
@@ -84,7 +84,8 @@ class InterfacedLambert(BRDFModel):
         Param("distribution", "microfacet normal distribution (rough interface)", "beckmann", choices=nd.DISTRIBUTIONS),
         Param("gaf", "masking-shadowing function (rough interface)", "smith", choices=nd.GAFS),
     )
-    reference = "interfaced_lambertian_microfacets.txt Eq. 3, 7-12 (flat: Eq. 8-10; rough: Eq. 11-12)"
+    reference = ("Meneveaux et al. 2015 (interfaced Lambertian microfacets), Eq. 3, 7-12 "
+                 "(flat: Eq. 8-10; rough: Eq. 11-12)")
 
     def resolve(self, values):
         if not any(k in values for k in ("roughness", "roughness_x", "roughness_y")):

@@ -1,14 +1,15 @@
-"""BRDF of a half space of Lambertian spheres (d'Eon): accurate form and fast variant.
+"""BRDF of a half space of Lambertian spheres (d'Eon 2021): accurate form and fast variant.
 
-Paper: lambert_sphere_brdf.txt. Accurate form, Eqs. 9-12 and 21:
+Paper: d'Eon 2021 (Lambert-sphere BRDF; docs/reference/papers.md), whose equation numbers are
+cited below. Accurate form, Eqs. 9-12 and 21:
 ``f = f1 + f_m^(0) + f_m^(1) cos(phi)`` where f1 is the exact single scattering with the exact
 phase function (Eq. 10, p(-wi.wo), Eq. 1; :mod:`microsim.models.radiative_transfer`) and
 ``f_m^(k) = f^(k) - f_1,3^(k)``: the Horak-Chandrasekhar Fourier modes of the three-term half
 space (f^(0) Eq. 30, f^(1) Eq. 22) minus the single scattering of the three-term phase function
 (Eqs. 38, 28); f_m^(2) = 0 (Eq. 21).
 
-Azimuth: phi = phi_o - phi_i with phi = 0 the backscatter half plane (CONVENTIONS 1). The paper
-uses the same: its f^(1) (> 0) multiplies cos(phi), and the first mode of the single scattering of
+Azimuth: phi = phi_o - phi_i with phi = 0 the backscatter half plane (docs/conventions.md §1). The
+paper uses the same: its f^(1) (> 0) multiplies cos(phi), and the first mode of the single scattering of
 this backward phase function is positive on the backscatter side. In code ``S cos(phi)`` is
 ``wi_x wo_x + wi_y wo_y``, with S = sqrt((1 - mu_i^2)(1 - mu_o^2)) (Eq. 28 prints it as
 sqrt((mu_i^2 - 1)(mu_o^2 - 1)), the same positive number).
@@ -161,7 +162,8 @@ class LambertSphere(_AlbedoOrKd):
         _KD,
         Param("method", "fit: the paper's approximations; exact: numerical H and exact constants", "fit", choices=("fit", "exact")),
     )
-    reference = "lambert_sphere_brdf.txt Eqs. 1, 8-12, 21-28, 30-38 (f1 + f_m^(0) + f_m^(1) cos phi; corrections in module notes)"
+    reference = ("d'Eon 2021 (Lambert-sphere BRDF), Eqs. 1, 8-12, 21-28, 30-38 "
+                 "(f1 + f_m^(0) + f_m^(1) cos phi; corrections in module notes)")
 
     def setup(self):
         c = self.albedo
@@ -188,7 +190,7 @@ class LambertSphere(_AlbedoOrKd):
 class LambertSphereFast(_AlbedoOrKd):
     name = "lambert_sphere_fast"
     params = (_ALBEDO, _KD)
-    reference = "lambert_sphere_brdf.txt Eq. 41 (with Eq. 10 for f1, Eq. 40 for k_d)"
+    reference = "d'Eon 2021 (Lambert-sphere BRDF), Eq. 41 (with Eq. 10 for f1, Eq. 40 for k_d)"
     #: Largest albedo c for which Eq. 41 keeps the directional albedo <= 1 (theta_i <= 89.9 deg;
     #: measured: 0.98 gives 0.988, 0.985 gives 1.02, c = 1 gives 1.29 at grazing incidence).
     energy_conserving_albedo_max = 0.98

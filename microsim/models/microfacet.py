@@ -1,10 +1,11 @@
 """The specular microfacet BRDF f = D(h) G(i, o, h) F(i.h) / (4 mu_i mu_o).
 
-interfaced_lambertian_microfacets.txt Eq. 3 (Cook-Torrance / Walter et al. 2007), with the
-NDFs and GAFs of :mod:`microsim.physics.distributions` and the Fresnel reflectance of
-:func:`microsim.physics.fresnel.fresnel`: a dielectric when ``k`` = 0 (exact unpolarised form, Eq. 7, total
-internal reflection for ``eta`` < 1), a conductor with complex index ``eta`` + i ``k``
-otherwise. Eq. 3 prints the denominator 4 |i.h| |o.h|; inserting the facet BRDF of Eq. 5,
+Meneveaux et al. 2015 (interfaced Lambertian microfacets; docs/reference/papers.md), Eq. 3
+(Cook-Torrance / Walter et al. 2007); equation numbers below are that paper's. With the NDFs and
+GAFs of :mod:`microsim.physics.distributions` and the Fresnel reflectance of
+:func:`microsim.physics.fresnel.fresnel`: a dielectric when ``k`` = 0 (exact unpolarised form,
+Eq. 7, total internal reflection for ``eta`` < 1), a conductor with complex index ``eta`` + i
+``k`` otherwise. Eq. 3 prints the denominator 4 |i.h| |o.h|; inserting the facet BRDF of Eq. 5,
 F delta(h, m) / (4 |i.h|^2), into Eq. 2 gives F D G |i.h| |o.h| / (4 |i.h|^2 |i.n| |o.n|)
 = F D G / (4 |i.n| |o.n|) (as in the paper's Eq. 26 and Walter et al. 2007 Eq. 20), which
 is the form used.
@@ -57,7 +58,8 @@ class Microfacet(BRDFModel):
         Param("eta", "real part of the relative refractive index", 1.5, 0.0, 100.0, lo_open=True),
         Param("k", "imaginary part (extinction); 0 = dielectric", 0.0, 0.0, 100.0),
     )
-    reference = "interfaced_lambertian_microfacets.txt Eq. 3 (D: Eq. 13, 15, 20; G: Eq. 14, 16-21; F: Eq. 7)"
+    reference = ("Meneveaux et al. 2015 (interfaced Lambertian microfacets), Eq. 3 "
+                 "(D: Eq. 13, 15, 20; G: Eq. 14, 16-21; F: Eq. 7)")
 
     def resolve(self, values):
         return nd.resolve_roughness(values)

@@ -1,7 +1,8 @@
 """The fully-correlated anisotropic micrograin BSDF (Lucas et al. 2024), ``micrograin``.
 
-Paper: ``papers/micrograin_bsdf_anisotropic.txt``; grain geometry and parametrisation in
-:mod:`microsim.models.micrograin_geometry`. The model (Eq. 20-23) is
+Paper: Lucas et al. 2024 (fully-correlated anisotropic micrograin BSDF; docs/reference/papers.md),
+whose equation, section, figure and appendix numbers are cited below; grain geometry and
+parametrisation in :mod:`microsim.models.micrograin_geometry`. The model (Eq. 20-23) is
 
     f(i, o) = tau0 [f^S,d(i, o) + D(h) G(i, o, h) F(i.h) / (4 mu_i mu_o)] + V_p(i, o) f^B(i, o)
 
@@ -13,12 +14,12 @@ pore visibility V_p = (1 - tau0) G^dist(i, o, 0) (Eq. 23) and the diffuse grain 
     T = (1 - F(i.m)) (1 - F(o.m)).
 
 For ``lambert``, ``conductor`` and ``mirror`` grains each term is the exact single-scattering
-contribution of the grain layer of CONVENTIONS 5.3. ``interfaced_lambert`` grains are not exact:
-the model's T = (1 - F(i.m)) (1 - F(o.m)) (Eq. 21-22) crosses the coat once each way and omits
-the internal reflections (the paper says so in Sec. 7), whereas the scenes' interfaced_lambert
-material follows every bounce under the interface (Fresnel and total internal reflection from
-inside, :mod:`microsim.materials`). On a flat facet the two body terms differ by the factor
-1 / (eta^2 (1 - K_d r_i)) of the exact one (interfaced_lambertian_microfacets.txt, Eq. 8-10;
+contribution of the grain layer of docs/conventions.md §5.3. ``interfaced_lambert`` grains are
+not exact: the model's T = (1 - F(i.m)) (1 - F(o.m)) (Eq. 21-22) crosses the coat once each way
+and omits the internal reflections (the paper says so in Sec. 7), whereas the scenes'
+interfaced_lambert material follows every bounce under the interface (Fresnel and total internal
+reflection from inside, :mod:`microsim.materials`). On a flat facet the two body terms differ by
+the factor 1 / (eta^2 (1 - K_d r_i)) of the exact one (Meneveaux et al. 2015, Eq. 8-10;
 :mod:`microsim.models.interfaced_lambert`): 1 at eta = 1, otherwise above 1 for white bodies
 (1 / (1 - r_e) at K_d = 1) and below it for dark ones (-> 1 / eta^2), so a comparison of such
 grains with a simulation measures this approximation as well. In every case the model is
@@ -26,16 +27,14 @@ reciprocal (G^dist depends on the union of the two shadows only, T and F(i.h) ar
 and its albedo is <= 1.
 
 Checked against explicit fields (issue 10; geometry/micrograins.py, exact grains): G1^dist and
-V_p against occlusion rays on the traced Embree scene, 108 cases, |z| <= 3.1
-(tests/test_micrograin_visibility.py); order-1 tables of conductor and Lambertian grains,
-(tau0, beta) = (0.3, 1), (0.6, 0.5), (0.9, 2) and (0.5; 0.5, 2) at phi_i = 0 and 90 deg,
-theta_i up to 86 deg: chi^2 per cell within its bound and median |rel| <= 2 % everywhere, the
-base term V_p f_B likewise (tests/test_micrograins.py). No disagreement was found. The
-uncorrelated form (``gaf = "uncorrelated"``, Eq. 17) is rejected near retro at 86 deg: at
-(0.5, 1) it gives 0.025 of the simulated retro cell (benchmarks/micrograins.py, Fig. 7
-analogue). Note for comparisons at grazing incidence: the per-realization estimates there are
-skewed (light passes a few gaps between grains), so a table's standard errors need many
-realizations (64 and more) before chi^2 per cell means what it says.
+V_p against occlusion rays on the traced Embree scene (tests/test_micrograin_visibility.py), and
+order-1 tables of conductor and Lambertian grains and the base term V_p f_B
+(tests/test_micrograins.py); no disagreement was found. The uncorrelated form
+(``gaf = "uncorrelated"``, Eq. 17) is rejected near retro at 86 deg, where it misses most of the
+simulated retro cell. Note for comparisons at grazing incidence: the per-realization estimates
+there are skewed (light passes a few gaps between grains), so a table's standard errors need many
+realizations (64 and more) before chi^2 per cell means what it says (measurements:
+docs/developer/performance.md, section 'Micrograin model against explicit fields (issue 10)').
 
 Eq. 21 is evaluated by fixed Gauss rules (the paper uses Monte Carlo). With the covered-area
 measure D(m)(m.n) dm = p(h') dh' dphi' / (2 pi) in unit space (h' = m'.z, uniform phi'), where
@@ -46,11 +45,10 @@ shadowing start (both like (sin theta' - h')^(3/2)); each of the three panels ta
 ``end_graded_gauss_rule``. For each h' the azimuths where i.m > 0 and o.m > 0 (i.e. i'.m' > 0 and
 o'.m' > 0) form at most two arcs, integrated in closed form for isotropic Lambertian grains and
 by Gauss-Legendre otherwise (with a sinh map for elongated grains, ``_arc_integral``). The nodes
-move continuously with the directions, so the model is a smooth function of them. Measured
-against 4x finer rules: relative error <= 1e-5 (isotropic), <= 2e-4 (beta_x / beta_y = 1/40),
-median ~1e-7.
+move continuously with the directions, so the model is a smooth function of them; against 4x
+finer rules the relative error is 2e-4 or less (same section).
 
-Parameters mirror the run config of a micrograin scene (CONVENTIONS 4), so that
+Parameters mirror the run config of a micrograin scene (conventions §4), so that
 ``microsim compare --param`` takes the names of the scene's TOML: ``material`` is the grains'
 ``[material] kind`` and takes that kind's keys, no others; ``base`` is the ``[base] kind`` and
 ``base_albedo`` its ``albedo``:
@@ -100,7 +98,7 @@ GAF = Param("gaf", "distant GAF: direction-correlated (Eq. 18) or not (Eq. 17), 
 _BETA = Param("beta", "grain height / lateral semi-axis, isotropic (sets beta_x = beta_y)", None, *BETA_RANGE)
 
 #: Grain material -> the keys it takes besides ``material``: those of its ``[material]`` table
-#: (CONVENTIONS 4). The kind codes are the tracer's (:mod:`microsim.materials`).
+#: (conventions §4). The kind codes are the tracer's (:mod:`microsim.materials`).
 GRAIN_KEYS = {"lambert": ("albedo",), "conductor": ("eta", "k"), "mirror": (), "interfaced_lambert": ("albedo", "eta")}
 GRAIN_CODES = {"lambert": LAMBERT, "conductor": CONDUCTOR, "mirror": MIRROR, "interfaced_lambert": INTERFACED_LAMBERT}
 #: Values of the grain keys a material does not take, after resolution (no interface: eta 1, k 0;
@@ -462,9 +460,8 @@ def _micrograin_kernel(wi, wo, field, surface, base_brdf, correlated, heights, a
 class Micrograin(MicrograinParams, gaf=GAF):
     name = "micrograin"
     reference = (
-        "Lucas, Ribardiere, Pacanowski, Barla 2024, A Fully-correlated Anisotropic Micrograin BSDF Model "
-        "(papers/micrograin_bsdf_anisotropic.txt): Eq. 8-12 (NDF), 16-19 and App. A-B (GAF), "
-        "20-23 and App. C (BSDF, pore visibility)"
+        "Lucas et al. 2024 (fully-correlated anisotropic micrograin BSDF), Eq. 8-12 (NDF), "
+        "16-19 and App. A-B (GAF), 20-23 and App. C (BSDF, pore visibility)"
     )
 
     def setup(self) -> None:

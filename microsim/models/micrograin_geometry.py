@@ -1,8 +1,9 @@
 """Geometry of a Boolean layer of half-ellipsoidal micrograins (Lucas et al. 2024, Sec. 4).
 
-Paper: ``papers/micrograin_bsdf_anisotropic.txt``. Grains are half-ellipsoids of vertical
+Paper: Lucas et al. 2024 (fully-correlated anisotropic micrograin BSDF; docs/reference/papers.md),
+whose equation, section and appendix numbers are cited below. Grains are half-ellipsoids of vertical
 semi-axis 1 and lateral semi-axes 1/beta_x, 1/beta_y whose centres are a Poisson process of
-density rho on the base plane z = 0 (CONVENTIONS 5.3), so that the covered fraction is
+density rho on the base plane z = 0 (docs/conventions.md §5.3), so that the covered fraction is
 ``tau0 = 1 - exp(-rho pi / (beta_x beta_y))``. That density, lambda and the unit-space maps
 below are the relations of the Boolean model in :mod:`microsim.physics.boolean_model`, which the
 micrograin scene generator (a later issue) is to share.

@@ -1,6 +1,7 @@
 """The micrograin BSDF of Lucas et al. 2023 with the Smith GAF, ``micrograin_smith``.
 
-As recalled in ``papers/micrograin_bsdf_anisotropic.txt`` (Sec. 3, Eq. 1-6):
+As recalled in Lucas et al. 2024 (fully-correlated anisotropic micrograin BSDF), Sec. 3, Eq. 1-6
+(the equation numbers below are that paper's; docs/reference/papers.md):
 
     f = w+ f^S + (1 - w+) f^B,                                          (Eq. 1)
     f^S = K_d / pi T_avg(i, o) + D(h) G(i, o) F(i.h) / (4 mu_i mu_o),   (Eq. 2)
@@ -19,10 +20,10 @@ public implementations of this model) or G = 1 / (1 + Lambda(i) + Lambda(o))
 (``"height_correlated"``). Lambda has no known closed form; it is computed by quadrature in
 :func:`microsim.models.micrograin_geometry.smith_lambda`.
 
-The 2023 paper is not in ``papers/``: its average transmission T_avg is taken as
-(1 - F(mu_i)) (1 - F(mu_o)), the interface transmittance at the mean normal n (1 for
-``lambert`` grains; the diffuse term is absent for ``conductor`` and ``mirror`` grains, and
-``mirror`` grains have F = 1 at every angle).
+The 2023 paper itself was not at hand (only its summary in Lucas et al. 2024): its average
+transmission T_avg is taken as (1 - F(mu_i)) (1 - F(mu_o)), the interface transmittance at the
+mean normal n (1 for ``lambert`` grains; the diffuse term is absent for ``conductor`` and
+``mirror`` grains, and ``mirror`` grains have F = 1 at every angle).
 
 Extension: Lucas et al. 2023 treat isotropic grains only; beta_x != beta_y is accepted here
 through the same affine map as the 2024 model (shape-invariant NDF, Lambda(w) = Lambda_1(w'),
@@ -30,7 +31,7 @@ tau_b+ from the unit-space direction), which reduces to the published model when
 beta_x = beta_y.
 
 Parameters are those of ``micrograin`` and mirror a micrograin scene's run config
-(CONVENTIONS 4): ``material`` (lambert | conductor | mirror | interfaced_lambert) with
+(docs/conventions.md §4): ``material`` (lambert | conductor | mirror | interfaced_lambert) with
 ``albedo``, ``eta``, ``k`` as its ``[material]`` table takes them, ``base`` (absorber | lambert)
 with ``base_albedo``; the old names ``bulk``, ``bulk_albedo`` and the old grain description by
 ``eta`` and ``k`` alone remain as aliases (see :mod:`microsim.models.micrograin`). As there, T
@@ -55,8 +56,8 @@ GAF = Param("gaf", "Smith GAF: G1(i) G1(o), or height-correlated 1 / (1 + Lambda
 class MicrograinSmith(MicrograinParams, gaf=GAF):
     name = "micrograin_smith"
     reference = (
-        "Lucas, Ribardiere, Pacanowski, Barla 2023, A Micrograin BSDF Model for the Rendering of Porous Layers, "
-        "as recalled in papers/micrograin_bsdf_anisotropic.txt: Eq. 1-6, with Eq. 24-25 for tau_beta+"
+        "Lucas et al. 2023 (micrograin BSDF for porous layers), as recalled in Lucas et al. 2024 "
+        "(fully-correlated anisotropic micrograin BSDF): Eq. 1-6, with Eq. 24-25 for tau_beta+"
     )
 
     def _eval(self, wi, wo):

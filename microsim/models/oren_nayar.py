@@ -12,7 +12,8 @@ functional approximation of the V-cavity model with Gaussian facet slopes (std s
     C3 = 0.125 sigma^2 / (sigma^2 + 0.09) (4 alpha beta / pi^2)^2
 
 with alpha = max(theta_i, theta_o), beta = min(theta_i, theta_o) and phi = phi_o - phi_i
-(cos(phi) > 0: light and viewer on the same side, the backscatter half plane of CONVENTIONS 1).
+(cos(phi) > 0: light and viewer on the same side, the backscatter half plane of
+docs/conventions.md §1).
 Cross-checked against the independent implementation in KimuraRyo/libbsdf
 (include/libbsdf/ReflectanceModel/OrenNayar.h, the same L1 + L2), not the qualitative model of
 pbrt. f is L_r / (E0 cos theta_i), so the 1/cos theta_i of the radiance form cancels.

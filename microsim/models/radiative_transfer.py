@@ -1,10 +1,10 @@
-"""Radiative transfer in a half space of independent point scatterers (CONVENTIONS 5.5).
+"""Radiative transfer in a half space of independent point scatterers (docs/conventions.md §5.5).
 
 The medium z < 0 has unit mean free path, single-scattering albedo c and phase function p(mu),
 mu the cosine between the propagation directions before and after scattering (so the light
 arriving along -wi and leaving along wo is turned by mu = -wi.wo). Its single scattering is
 
-    f1(wi, wo) = c p(-wi.wo) / (mu_i + mu_o)        (lambert_sphere_brdf.txt, Eq. 10),
+    f1(wi, wo) = c p(-wi.wo) / (mu_i + mu_o)        (d'Eon 2021, Eq. 10),
 
 exact for any phase function: the Lambert-sphere model, the Boolean-sphere single-scattering
 model, their tests and the dilute-limit benchmark all take it from here.

@@ -1,5 +1,5 @@
 """Models a user brings: a plain function or a :class:`BRDFModel` subclass, from Python or, with
-``--model module:Name`` or ``--model path.py:Name``, from the command line (CONVENTIONS 8).
+``--model module:Name`` or ``--model path.py:Name``, from the command line (docs/conventions.md §8).
 
 A plain function ``f(wi, wo, **params)`` receives float64 arrays of shape (N, 3) of unit
 directions both above the horizon (the rest are 0, as for every model) and returns f in 1/sr,

@@ -1,4 +1,7 @@
-"""The vMF diffuse BRDF (d'Eon and Weidlich 2024), vmf_diffuse_brdf.txt.
+"""The vMF diffuse BRDF (d'Eon and Weidlich 2024), ``vmf_diffuse``.
+
+Paper: d'Eon and Weidlich 2024 (VMF Diffuse; docs/reference/papers.md), whose equation, section
+and appendix numbers are cited below.
 
 One-sided Lambertian flakes of albedo c (``albedo``) with the von Mises-Fisher NDF (Eq. 1) of
 shape alpha = -log(1 - sqrt(r)) (Eq. 2), r = ``roughness`` in [0, 1]; r = 1 is alpha = inf
@@ -6,19 +9,20 @@ shape alpha = -log(1 - sqrt(r)) (Eq. 2), r = ``roughness`` in [0, 1]; r = 1 is a
 
     f = c f1 + c^2 f2 + c^3 f3 + f_m,   f_k = f_k^(0) + 2 f_k^(1) cos(phi) + 2 f_k^(2) cos(2 phi)
 
-with phi the relative azimuth (phi = 0 backscatter, CONVENTIONS 1: the fitted cos(phi)
-coefficients of f1 are positive, the retro-reflection that a Monte-Carlo simulation of the
-flake medium shows), f1 from Section 3.3 with the cross section sigma of Eq. 4-6, f2 and f3
+with phi the relative azimuth (phi = 0 backscatter, docs/conventions.md §1: the fitted
+cos(phi) coefficients of f1 are positive, the retro-reflection that a Monte-Carlo simulation of
+the flake medium shows), f1 from Section 3.3 with the cross section sigma of Eq. 4-6, f2 and f3
 from Appendix A, f_m from Eq. 9. ``kd`` replaces ``albedo`` by the remap of Section 5 (meant
-to make the albedo at normal incidence kd; it misses by up to 29 %, see :func:`albedo_from_kd`). :meth:`VMFDiffuse.orders` returns the four terms
-separately (the scattering orders 1, 2, 3, 4+ of a table).
+to make the albedo at normal incidence kd; it misses by up to 29 %, see :func:`albedo_from_kd`).
+:meth:`VMFDiffuse.orders` returns the four terms separately (the scattering orders 1, 2, 3, 4+
+of a table).
 
-Corrections to the extracted text (tests/test_models_vmf.py checks each):
+Corrections to the printed text (tests/test_models_vmf.py checks each):
 
 - Fourier convention. The text writes f_k^(0) + f_k^(1) cos(phi) + f_k^(2) cos(2 phi), but the
   fitted modes follow Horak-Chandrasekhar's f^(0) + 2 sum f^(m) cos(m phi) (the convention of
-  lambert_sphere_brdf.txt Eq. 28, which is half the cos(phi) coefficient of its single
-  scattering): the exact single scattering of the flake medium, integral D(m) <i.m><o.m> dm
+  d'Eon 2021, Eq. 28, which is half the cos(phi) coefficient of its single scattering): the
+  exact single scattering of the flake medium, integral D(m) <i.m><o.m> dm
   / (pi (mu_o sigma(mu_i) + mu_i sigma(-mu_o))), has cos(phi) coefficients 1.72-2.16 times
   (median 1.96) the printed f1^(1) and cos(2 phi) coefficients a median 2.04 times f1^(2)
   (16 cosine pairs at each of r = 0.2, 0.5, 1); with the factor 2 the
@@ -160,7 +164,7 @@ def higher_orders(c: float, r: float, ui, uo) -> np.ndarray:
     """f_m, fourth and higher orders (Eq. 9), with the reconstruction of the module docstring.
 
     C_k = (-0.453 (1-c) - 0.544 sqrt(1-c) + 1) / (1.429 sqrt(1-c) + 1) (the Lambert-sphere
-    albedo of c, lambert_sphere_brdf.txt Eq. 40) and
+    albedo of c, d'Eon 2021, Eq. 40) and
     C_a = c (1.169 sqrt(1-c) + 1)^(-atan((r - 0.265) r + 0.0225) erf(sqrt(1-c))).
     """
     s = math.sqrt(1.0 - c)
@@ -178,7 +182,7 @@ class VMFDiffuse(BRDFModel):
         Param("kd", "albedo of the BRDF at normal incidence (Sec. 5 remap; give albedo or kd)", None, 0.0, 1.0),
         Param("roughness", "r of Eq. 2: 0 = Lambert, 1 = Lambert sphere", None, 0.0, 1.0),
     )
-    reference = "vmf_diffuse_brdf.txt Eq. 1-9, Sec. 3.3, Sec. 5, Appendix A"
+    reference = "d'Eon and Weidlich 2024 (VMF Diffuse), Eq. 1-9, Sec. 3.3, Sec. 5, Appendix A"
 
     def resolve(self, values):
         given = [k for k in ("albedo", "kd") if k in values]

@@ -4,13 +4,13 @@ One home for the formulas that a scene generator and the analytic model of the s
 share, so that the two can never drift apart (generators, models, benchmarks and tests import
 them from here).
 
-Boolean spheres (CONVENTIONS 5.2), radius r = 1, centres a Poisson process of n per unit
+Boolean spheres (docs/conventions.md §5.2), radius r = 1, centres a Poisson process of n per unit
 volume: a point is in the void when no centre lies within r of it, with probability
 exp(-n 4/3 pi) = 1 - phi, so n = -ln(1 - phi) / (4/3 pi); a ray in the void travels an
 exponential distance with mean l = 1 / (n pi r^2) = 4 / (-3 ln(1 - phi)) before it meets a
 sphere, and r / l = n pi r^2 = -3/4 ln(1 - phi) measures the finite size of the spheres.
 
-Micrograins (CONVENTIONS 5.3; papers/micrograin_bsdf_anisotropic.txt, Sec. 4): a Boolean model
+Micrograins (conventions §5.3; Lucas et al. 2024, Sec. 4): a Boolean model
 of grains on a plane. Half-ellipsoids of vertical semi-axis r_s = 1 and lateral semi-axes
 1/beta_x, 1/beta_y have their centres Poisson on the base plane z = 0 with density rho per unit
 area; a base point is bare when no centre lies in the ellipse of area pi / (beta_x beta_y)
@@ -42,7 +42,7 @@ def radius_over_free_path(phi: float) -> float:
 
 
 def free_path(phi: float) -> float:
-    """Mean void free path l = 4 / (-3 ln(1 - phi)) in radii (CONVENTIONS 5.2)."""
+    """Mean void free path l = 4 / (-3 ln(1 - phi)) in radii (conventions §5.2)."""
     return 1.0 / radius_over_free_path(phi)
 
 

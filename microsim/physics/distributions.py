@@ -3,7 +3,8 @@
 Shared by the specular ``microfacet`` model, ``interfaced_lambert`` and the V-cavity geometry
 generator. Directions are float arrays (..., 3) in the macro-surface frame (n = +z); facet
 normals m are unit vectors with m.z > 0. Every NDF is normalised in projected area,
-integral of D(m) (m.n) d(omega_m) = 1 (interfaced_lambertian_microfacets.txt, Sec. 2.1).
+integral of D(m) (m.n) d(omega_m) = 1 (Meneveaux et al. 2015, Sec. 2.1; the equation numbers
+below are theirs).
 
 Distributions (``roughness_x``, ``roughness_y`` act along the x and y axes of the surface):
 

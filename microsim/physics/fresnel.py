@@ -17,7 +17,7 @@ def fresnel_dielectric(cos_i, eta):
 
     ``cos_i`` is the cosine between the incident direction and the normal on the incident
     side (>= 0); ``eta`` = n_transmitted / n_incident. Total internal reflection gives 1.
-    Form of Walter et al. 2007, Eq. 22 (also interfaced_lambertian_microfacets.txt, Eq. 4).
+    Form of Walter et al. 2007, Eq. 22 (also Meneveaux et al. 2015, Eq. 4).
     """
     c = min(abs(cos_i), 1.0)
     g2 = eta * eta - 1.0 + c * c
@@ -100,7 +100,7 @@ def _external_diffuse_reflectance_quadrature(eta: float) -> float:
 
 
 def external_diffuse_reflectance(eta: float) -> float:
-    """r_e: reflectance of the flat interface under Lambertian light from outside (interfaced_lambertian_microfacets.txt Eq. 10)."""
+    """r_e: reflectance of the flat interface under Lambertian light from outside (Meneveaux et al. 2015, Eq. 10)."""
     n = eta
     if n < MOLENAAR_MIN_ETA:
         return _external_diffuse_reflectance_quadrature(n)
@@ -115,5 +115,5 @@ def external_diffuse_reflectance(eta: float) -> float:
 
 
 def internal_diffuse_reflectance(eta: float) -> float:
-    """r_i from n_i^2 (1 - r_i) = 1 - r_e (interfaced_lambertian_microfacets.txt Eq. 9-10)."""
+    """r_i from n_i^2 (1 - r_i) = 1 - r_e (Meneveaux et al. 2015, Eq. 9-10)."""
     return 1.0 - (1.0 - external_diffuse_reflectance(eta)) / eta**2

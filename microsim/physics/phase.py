@@ -6,7 +6,7 @@ the medium's kernel branches on, :func:`sample_cosine`), p(mu) in 1/sr, and how 
 (recorded in a table's ``scene/phase_sampling``). The config's ``[scene] phase``, the medium
 tracer and the models read it from here.
 
-The Lambert sphere's (lambert_sphere_brdf.txt, Eqs. 1-6) peaks at backscatter (mean cosine
+The Lambert sphere's (d'Eon 2021, Eqs. 1-6) peaks at backscatter (mean cosine
 g = -4/9). Its samplers are numba ufuncs: they take arrays from Python and scalars inside
 ``@numba.njit`` kernels (the volumetric reference tracer calls them there).
 """
@@ -79,7 +79,7 @@ class Phase(NamedTuple):
 ISOTROPIC, LAMBERT_SPHERE = 0, 1
 PHASES = {phase.name: phase for phase in (
     Phase("isotropic", ISOTROPIC, phase_isotropic, "exact: mu = 1 - 2 xi"),
-    Phase("lambert_sphere", LAMBERT_SPHERE, phase_lambert_sphere, "exact: lambert_sphere_brdf.txt Eq. 5 (three uniforms)"),
+    Phase("lambert_sphere", LAMBERT_SPHERE, phase_lambert_sphere, "exact: d'Eon 2021, Eq. 5 (three uniforms)"),
 )}
 
 

@@ -1,0 +1,114 @@
+"""The layout of a table, declared once: every attribute and dataset with its axes, unit and
+meaning (conventions §6).
+
+The core datasets (incidences, sensor, energy, paths, diagnostics) are declared here, and each
+estimator declares its own (``Estimator.DATASETS``, :mod:`microsim.estimators`): the loader's
+shape checks (:data:`microsim.tables.AXES`, :data:`~microsim.tables.REQUIRED`) and the
+reference page of the documentation are derived from :func:`datasets`. ``FORMAT_VERSION`` is
+written into every table; it changes when a dataset changes meaning or shape (adding one does
+not).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .tally import COUNT_NAMES, ENERGY_NAMES
+
+#: the version of the layout, written as the ``format_version`` attribute of every table
+FORMAT_VERSION = "1.0"
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """One dataset: its HDF5 path, the names of its axes (None where its shape is free), its
+    unit ("" for a number), what it holds, and when a table has it (``when``: "always", or the
+    condition; ``required``: the loader refuses a table without it)."""
+
+    name: str
+    axes: tuple[str, ...] | None
+    unit: str
+    doc: str
+    when: str = "always"
+    required: bool = False
+
+
+@dataclass(frozen=True)
+class Attribute:
+    """One attribute of the file's root group."""
+
+    name: str
+    doc: str
+    when: str = "always"
+
+
+#: the lengths the axes name
+AXIS_LENGTHS = {
+    "incidences": "n_i, the incidences of [illumination]",
+    "cells": "n_c, the sensor's cells (about sensor.cells)",
+    "orders": "4: scattering orders 1, 2, 3 and 4 or more",
+    "retro_rings": "n_r = sensor.retro_rings",
+    "xyz": "3: the components of a unit vector",
+    "rings": "the sensor's rings of cells, from the pole",
+}
+
+ATTRIBUTES = (
+    Attribute("format_version", f"the version of this layout ({FORMAT_VERSION})", "tables written by microsim 0.1.0 "
+              "after the layout was declared; older tables have the same layout without it"),
+    Attribute("microsim_version", "the version of microsim that wrote the table"),
+    Attribute("config_toml", "the run config, validated and complete (every default written out), as TOML"),
+    Attribute("created_utc", "when the table was written (ISO 8601, UTC)"),
+    Attribute("seed", "run.seed"),
+    Attribute("wall_time_s", "seconds of tracing, without compiling"),
+    Attribute("name", "the config's name (a label, \"\" if none)"),
+    Attribute("realizations", "independent geometry samples: the batches of the standard errors"),
+    Attribute("paths_per_realization", "paths traced per realization and incidence"),
+    Attribute("max_order", "run.max_order (0: unlimited)"),
+    Attribute("backend", "how Embree was called: direct or embreex"),
+    Attribute("backend_fallback", "what the backend substituted, and why (\"\" if nothing)"),
+    Attribute("albedos_traced_together", "the material albedos traced in one run", "a table of an albedo list"),
+    Attribute("albedo_traced", "the albedo the paths were traced at (the largest)", "a table of an albedo list"),
+)
+
+_ENERGY_DOCS = {
+    "transmitted": "energy that left through the bottom of the scene",
+    "truncated": "energy cut by run.max_order or the tracer's limit of interactions",
+    "absorbed": "energy absorbed by the materials",
+    "balance": "albedo + transmitted + truncated + absorbed: 1 in expectation",
+}
+_COUNT_DOCS = {
+    "segments": "ray segments traced",
+    "inside_hits": "hits on a back face, passed through (a ray inside overlapping spheres)",
+    "roulette_kills": "paths ended by Russian roulette",
+}
+
+CORE = (
+    Dataset("incidence/theta", ("incidences",), "rad", "polar angle of each incidence wi", required=True),
+    Dataset("incidence/phi", ("incidences",), "rad", "azimuth of each incidence wi", required=True),
+    *(Dataset(f"sensor/{name}", ("cells",), "rad", doc, required=True) for name, doc in (
+        ("theta_lo", "lower polar bound of each cell"), ("theta_hi", "upper polar bound of each cell"),
+        ("phi_lo", "lower azimuth bound of each cell (relative azimuth; cells of a ring are centred on "
+                   "phi = 2 pi j / n)"),
+        ("phi_hi", "upper azimuth bound of each cell"))),
+    Dataset("sensor/direction", ("cells", "xyz"), "", "unit vector of each cell's centre", required=True),
+    Dataset("sensor/solid_angle", ("cells",), "sr", "solid angle of each cell", required=True),
+    Dataset("sensor/projected_solid_angle", ("cells",), "sr", "projected solid angle P_C of each cell "
+            "(the integral of cos theta over it)", required=True),
+    Dataset("sensor/ring_counts", None, "", "cells in each ring, from the pole (the sensor is rebuilt from it)",
+            required=True),
+    *(Dataset(f"energy/{name}{suffix}", ("incidences",), "",
+              doc if not suffix else f"standard error of energy/{name}",
+              required=name in ("transmitted", "truncated") and not suffix)
+      for name, doc in ((n, _ENERGY_DOCS[n]) for n in (*ENERGY_NAMES, "balance")) for suffix in ("", "_stderr")),
+    Dataset("paths", ("incidences",), "", "paths traced per incidence", required=True),
+    *(Dataset(f"diagnostics/{name}", ("incidences",), "", _COUNT_DOCS[name]) for name in COUNT_NAMES),
+    Dataset("scene/<count>", None, "", "what each realization generated (spheres, images, triangles, ...); the "
+            "group's attributes hold the resolved scene parameters and the largest triangle count"),
+)
+
+
+def datasets() -> tuple[Dataset, ...]:
+    """Every dataset a table may hold: the core ones, then each registered estimator's."""
+    from . import estimators
+
+    return CORE + tuple(d for name in estimators.ESTIMATORS for d in estimators.get(name).DATASETS)
