@@ -1,0 +1,68 @@
+"""MkDocs hooks: the pages generated from microsim's own declarations.
+
+A page holds a marker ``<!-- generated: NAME -->``, which :func:`on_page_markdown` replaces with
+the Markdown of ``GENERATORS[NAME]``: the models from their registry (parameters and ranges as
+``microsim models`` prints them), the table format from :mod:`microsim.table_layout`, the config
+keys from the config schema. The docs can then not drift from the code.
+"""
+
+from __future__ import annotations
+
+import re
+
+MARKER = re.compile(r"<!-- generated: ([a-z_-]+) -->")
+
+
+def models_page() -> str:
+    from microsim import models
+
+    lines = []
+    for name in models.available():
+        cls = models.get(name)
+        summary = (cls.__doc__ or "").strip().split("\n\n")[0]
+        lines += [f"## `{name}`", "", " ".join(summary.split()), "", f"Reference: {cls.reference}", ""]
+        if not cls.reciprocal:
+            lines += [f"Not reciprocal: {cls.nonreciprocal_reason}", ""]
+        lines += ["| parameter | accepted | default | meaning |", "|---|---|---|---|"]
+        for p in cls.params:
+            lines.append(f"| `{p.name}` | {_cell(p.describe())} | {_cell(p.default_text())} | {_cell(p.doc)} |")
+        lines += ["", "As `microsim models` prints it:", "", "```text", *models.listing([name]), "```", ""]
+    return "\n".join(lines)
+
+
+def table_format_page() -> str:
+    from microsim import table_layout
+
+    lines = [f"Format version: **{table_layout.FORMAT_VERSION}** (the `format_version` attribute).", "",
+             "### Attributes of the root group", "", "| attribute | meaning | present |", "|---|---|---|"]
+    lines += [f"| `{a.name}` | {_cell(a.doc)} | {_cell(a.when)} |" for a in table_layout.ATTRIBUTES]
+    lines += ["", "### Axes", "", "| axis | length |", "|---|---|"]
+    lines += [f"| `{axis}` | {_cell(length)} |" for axis, length in table_layout.AXIS_LENGTHS.items()]
+    lines += ["", "### Datasets", "", "| dataset | axes | unit | meaning | present | required |",
+              "|---|---|---|---|---|---|"]
+    for d in table_layout.datasets():
+        axes = "(" + ", ".join(d.axes) + ")" if d.axes is not None else "free"
+        lines.append(f"| `{d.name}` | {axes} | {d.unit or '-'} | {_cell(d.doc)} | {_cell(d.when)} | "
+                     f"{'yes' if d.required else ''} |")
+    return "\n".join(lines)
+
+
+def config_keys_page() -> str:
+    from microsim import config, sweep
+
+    lines = ["| key | kinds that have it | accepted | default | meaning |", "|---|---|---|---|---|"]
+    for key in config.keys() + sweep.keys():
+        lines.append(f"| `{key.name}` | {_cell(key.kinds or 'all')} | {_cell(key.accepted)} | {_cell(key.default)} | "
+                     f"{_cell(key.doc)} |")
+    return "\n".join(lines)
+
+
+GENERATORS = {"models": models_page, "table-format": table_format_page, "config-keys": config_keys_page}
+
+
+def _cell(text: str) -> str:
+    return " ".join(str(text).split()).replace("|", "\\|")
+
+
+def on_page_markdown(markdown: str, page, config, files) -> str:
+    return MARKER.sub(lambda match: GENERATORS[match[1]](), markdown)

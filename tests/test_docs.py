@@ -1,0 +1,107 @@
+"""The documentation: the site builds with ``mkdocs build --strict`` (no broken link, anchor or
+reference), names every CLI option, config key, model and table dataset, and its getting-started
+commands run as written (at fewer paths); the README's links resolve inside the repository, and
+no file of the project refers to a path outside it."""
+
+import html
+import os
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from microsim.cli import main
+
+ROOT = Path(__file__).resolve().parent.parent
+#: the getting-started commands run at this many paths an incidence
+FEW_PATHS = "20000"
+
+
+@pytest.fixture(scope="module")
+def site_text(tmp_path_factory) -> str:
+    """The text of every page of the site, built with --strict."""
+    site = tmp_path_factory.mktemp("site")
+    done = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(site)], cwd=ROOT,
+                          capture_output=True, text=True, env={**os.environ, "NO_MKDOCS_2_WARNING": "1"})
+    assert done.returncode == 0, done.stderr
+    pages = sorted(site.rglob("index.html"))
+    assert len(pages) > 30
+    return "\n".join(html.unescape(re.sub(r"<[^>]+>", " ", page.read_text())) for page in pages)
+
+
+def test_every_cli_option_config_key_model_and_dataset_is_in_the_docs(site_text):
+    from microsim import cli, config, models, sweep, table_layout
+
+    words = set(re.findall(r"[^\s,;()\[\]]+", site_text))
+    missing = [f"microsim {name}" for name in cli.cli.commands if f"microsim {name}" not in site_text]
+    for name, command in cli.cli.commands.items():
+        missing += [f"{name} {opt}" for param in command.params for opt in param.opts
+                    if param.param_type_name == "option" and opt not in words]
+    missing += [key.name for key in config.keys() + sweep.keys() if key.name not in site_text]
+    missing += [name for name in models.available() if name not in words]
+    missing += [d.name for d in table_layout.datasets() if d.name not in words]
+    missing += [a.name for a in table_layout.ATTRIBUTES if a.name not in words]
+    assert missing == []
+
+
+def test_the_check_sees_what_is_missing(site_text):
+    """The check itself: a name the docs do not have is missing."""
+    assert "--no-such-option" not in set(re.findall(r"[^\s,;()\[\]]+", site_text))
+
+
+def getting_started_commands() -> list[str]:
+    page = (ROOT / "docs" / "getting-started.md").read_text()
+    blocks = re.findall(r"```bash\n(.*?)```", page, re.S)
+    return [line.strip() for block in blocks for line in block.splitlines() if line.strip()]
+
+
+def test_getting_started_runs_as_written(tmp_path, monkeypatch, capsys):
+    """Install, a first table, compare, fit: every command of the page, in a directory with the
+    repository's runs/, at FEW_PATHS paths an incidence (the install is what .ci/run does)."""
+    commands = getting_started_commands()
+    install = [c for c in commands if not c.startswith("microsim ")]
+    assert install == ["python3 -m venv .venv && . .venv/bin/activate && pip install -e ."]
+    runs = [c for c in commands if c.startswith("microsim run ")]
+    assert runs and all(re.search(r"--paths \d+", c) for c in runs)
+    (tmp_path / "runs").symlink_to(ROOT / "runs")
+    monkeypatch.chdir(tmp_path)
+    for command in commands[len(install):]:
+        argv = shlex.split(re.sub(r"--paths \d+", f"--paths {FEW_PATHS}", command))[1:]
+        assert main(argv) == 0, (command, capsys.readouterr().err)
+    assert sorted(p.name for p in tmp_path.glob("*.h5")) == ["halfspace_lambert_sphere.h5", "spheres_phi030.h5"]
+    assert list((tmp_path / "figures").glob("*.png"))
+
+
+LINK = re.compile(r"\]\(([^)\s]+)\)")
+
+
+def test_the_readme_s_links_resolve_inside_the_repository():
+    targets = LINK.findall((ROOT / "README.md").read_text())
+    assert len(targets) > 10
+    for target in targets:
+        assert not re.match(r"[a-z]+:", target), f"README links outside the repository: {target}"
+        path = (ROOT / target.split("#")[0]).resolve()
+        assert path.is_file() and ROOT in path.parents, target
+
+
+#: what a reference to a file outside the repository looks like (assembled, not to match itself)
+OUTSIDE = re.compile("|".join([r"\.\./shared", "CONVEN" + r"TIONS \d", r"CONVEN" + r"TIONS\.md",
+                               r"(lambert_sphere_brdf|interfaced_lambertian_microfacets|micrograin_bsdf_anisotropic|"
+                               r"vmf_diffuse_brdf)\.t" + "xt"]))
+
+
+def test_no_file_of_the_project_refers_to_a_path_outside_it():
+    files = subprocess.run(["git", "ls-files", "--cached", "--others", "--exclude-standard"], cwd=ROOT,
+                           capture_output=True, text=True, check=True).stdout.split()
+    found = []
+    for name in files:
+        path = ROOT / name
+        if path.suffix in {".png", ".h5", ".npz", ".npy"} or not path.is_file():
+            continue
+        for number, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
+            if OUTSIDE.search(line):
+                found.append(f"{name}:{number}: {line.strip()[:80]}")
+    assert found == []
