@@ -1,4 +1,5 @@
-"""MkDocs hooks: the pages generated from microsim's own declarations.
+"""MkDocs hooks: the pages generated from microsim's own declarations, and the docstrings'
+Sphinx roles shown as code in the API reference.
 
 A page holds a marker ``<!-- generated: NAME -->``, which :func:`on_page_markdown` replaces with
 the Markdown of ``GENERATORS[NAME]``: the models from their registry (parameters and ranges as
@@ -11,6 +12,9 @@ from __future__ import annotations
 import re
 
 MARKER = re.compile(r"<!-- generated: ([a-z_-]+) -->")
+#: a Sphinx cross-reference role of a docstring (``:class:`~microsim.progress.Progress```) as
+#: mkdocstrings renders it, role and all
+SPHINX_ROLE = re.compile(r":(?:class|func|meth|mod|data|attr|exc|obj):<code>(~?)([^<]+)</code>")
 
 
 def models_page() -> str:
@@ -31,16 +35,17 @@ def models_page() -> str:
 
 
 def table_format_page() -> str:
-    from microsim import table_layout
+    from microsim import table_layout, tables
 
     lines = [f"Format version: **{table_layout.FORMAT_VERSION}** (the `format_version` attribute).", "",
-             "### Attributes of the root group", "", "| attribute | meaning | present |", "|---|---|---|"]
-    lines += [f"| `{a.name}` | {_cell(a.doc)} | {_cell(a.when)} |" for a in table_layout.ATTRIBUTES]
+             "### Attributes", "", "| attribute | of | meaning | present |", "|---|---|---|---|"]
+    lines += [f"| `{a.name}` | {'the file' if a.group == '/' else a.group} | {_cell(a.doc)} | {_cell(a.when)} |"
+              for a in table_layout.ATTRIBUTES]
     lines += ["", "### Axes", "", "| axis | length |", "|---|---|"]
     lines += [f"| `{axis}` | {_cell(length)} |" for axis, length in table_layout.AXIS_LENGTHS.items()]
     lines += ["", "### Datasets", "", "| dataset | axes | unit | meaning | present | required |",
               "|---|---|---|---|---|---|"]
-    for d in table_layout.datasets():
+    for d in tables.DATASETS:
         axes = "(" + ", ".join(d.axes) + ")" if d.axes is not None else "free"
         lines.append(f"| `{d.name}` | {axes} | {d.unit or '-'} | {_cell(d.doc)} | {_cell(d.when)} | "
                      f"{'yes' if d.required else ''} |")
@@ -66,3 +71,8 @@ def _cell(text: str) -> str:
 
 def on_page_markdown(markdown: str, page, config, files) -> str:
     return MARKER.sub(lambda match: GENERATORS[match[1]](), markdown)
+
+
+def on_page_content(html: str, page, config, files) -> str:
+    """The docstrings' Sphinx roles as code: the name, its last part where it starts with ~."""
+    return SPHINX_ROLE.sub(lambda m: f"<code>{m[2].rsplit('.', 1)[-1] if m[1] else m[2]}</code>", html)

@@ -45,8 +45,8 @@ def cli():
 @cli.command()
 @click.argument("config_path", metavar="CONFIG.toml", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--out", "out", type=click.Path(path_type=Path),
-              help="table to write [default: <config file stem>.h5, in the current directory]; for a "
-                   "config with [sweep], the directory of its tables [default: <config file stem>]")
+              help="table to write [default: the config file's stem + .h5, in the current directory]; for "
+                   "a config with [sweep], the directory of its tables [default: the config file's stem]")
 @click.option("--workers", type=click.IntRange(1, MAX_WORKERS), default=1, show_default=True, help="worker processes")
 @click.option("--threads", type=click.IntRange(1, MAX_THREADS), default=1, show_default=True,
               help="threads per process, sharing one scene (direct backend)")
@@ -56,7 +56,7 @@ def cli():
 @click.option("--seed", type=click.IntRange(0, 2**63 - 1), help="random seed (overrides run.seed)")
 @click.option("--force", is_flag=True, help="overwrite an existing table (and, without --resume, discard the units "
                                            "an interrupted run kept)")
-@click.option("--resume", is_flag=True, help="continue an interrupted run from the units it kept in <table>.partial")
+@click.option("--resume", is_flag=True, help="continue an interrupted run from the units it kept in TABLE.partial")
 @click.option("--executor", type=click.Choice(list(EXECUTORS)), default="local", show_default=True,
               help="local: this process or --workers forked processes; dask: tasks on a dask.distributed "
                    "cluster (a LocalCluster of --workers processes without --scheduler)")
@@ -70,18 +70,14 @@ def run(config_path, **flags):
 
     with IgnoredOnceDone() as once_done:  # once the tables are written, a signal waits for the report
         try:
-            outcome = session.run(config_path, **flags, progress=ProgressBar(), on_point=_print_point,
-                                  once_done=once_done)
+            outcome = session.run(config_path, **flags, progress=ProgressBar(),
+                                  on_point=lambda point: click.echo(point.line()), once_done=once_done)
         except session.RunRefused as err:
             raise BadInput(str(err)) from None
         except session.RunFailed as err:
             raise click.ClickException(str(err)) from None
         for line in outcome.report():
             click.echo(line)
-
-
-def _print_point(point) -> None:
-    click.echo(point.line())
 
 
 @cli.command()
@@ -142,7 +138,8 @@ def fit(table_path, model_name, free, params, order, as_json, plot_dir):
             result = fit_module.fit(table, cls, list(free), values, order, progress=status)
         except ValueError as err:
             message = " ".join(str(err).split())
-            raise BadInput(message if message.startswith(("--", "table")) else f"--model {model_name}: {message}") from None
+            raise BadInput(message if message.startswith(("--", "table")) else f"--model {model_name}: {message}") \
+                from None
     fitted = ", ".join(f"{k} = {v:.6g} +- {e:.2g}" for k, (v, e) in result.free.items())
     header = (f"fit of {cls.name} to {table_path}: {fitted}; chi^2 / dof = {result.chi2_per_dof:.3g} "
               f"({result.dof:.1f} dof, {result.evaluations} evaluations)\nbest fit")
@@ -240,7 +237,8 @@ def _report(result, table, title, as_json, plot_dir, json_object) -> None:
                    f"of the table, {100 * (1 - compare_module.CHI2_OUTSIDE):g} % two-sided bounds; consistent: "
                    "within them, and the albedo's z^2 within its bound)")
         click.echo(f"{'theta_i':>8} {'phi_i':>6} {'cells':>6} {'med|rel|':>9} {'rel rmse':>9} {'max|z|':>7} "
-                   f"{'chi2/cell':>9} {'bounds':>14} {'albedo z^2':>10} {'bound':>6}  {'verdict':<12} {'albedo model':>12} "
+                   f"{'chi2/cell':>9} {'bounds':>14} {'albedo z^2':>10} {'bound':>6}  {'verdict':<12} "
+                   f"{'albedo model':>12} "
                    f"{'albedo sim':>16}")
         rows = result.as_dict()
         for row in [*rows["per_incidence"], rows["overall"]]:
@@ -272,9 +270,10 @@ def main(argv=None) -> int:
     A stop signal (SIGINT, SIGTERM, SIGHUP) ends the command in one line whenever it comes, and
     the process then dies of it. While a run traces and writes its tables, the session stops it
     cleanly (:class:`microsim.interrupts.StopOnSignals`); at any other time there is nothing to
-    clean up, and the process dies at once (:func:`microsim.interrupts.die_on_stop_signals`). Where a caller of ``main`` left SIGINT
-    to Python's KeyboardInterrupt, it is reported in the same line and ``main`` returns 130. The
-    handlers are the caller's again when ``main`` returns or raises."""
+    clean up, and the process dies at once (:func:`microsim.interrupts.die_on_stop_signals`).
+    Where a caller of ``main`` left SIGINT to Python's KeyboardInterrupt, it is reported in the
+    same line and ``main`` returns 130. The handlers are the caller's again when ``main`` returns
+    or raises."""
     installed = die_on_stop_signals()
     try:
         cli.main(args=argv, prog_name="microsim", standalone_mode=False)

@@ -40,7 +40,8 @@ class Illumination(Section):
     """Incidences: ``theta_i_deg`` a list; ``phi_i_deg`` one azimuth for all, or a list as long as
     ``theta_i_deg`` (one incidence per pair)."""
 
-    theta_i_deg: list[Annotated[float, Field(ge=0.0, le=89.9)]] = Field(min_length=1, max_length=256)
+    theta_i_deg: list[Annotated[float, Field(ge=0.0, le=89.9)]] = Field(
+        min_length=1, max_length=256, description="polar angle of each incidence, deg (one table row each)")
     phi_i_deg: list[Annotated[float, Field(ge=-360.0, le=360.0)]] = Field(
         [0.0], min_length=1, max_length=256, description="one azimuth for all incidences, or one per theta_i_deg")
 
@@ -161,8 +162,10 @@ def validate(data: dict) -> Config:
     """Validate a config dictionary (as parsed from TOML)."""
     try:
         config = Config.model_validate(data)
-    except pydantic.ValidationError as err:
-        raise ConfigError(describe_error(err.errors()[0], data)) from None
+    except pydantic.ValidationError as err:  # an unknown key first: it is often the misspelt missing one
+        errors = err.errors()
+        first = next((e for e in errors if e["type"] == "extra_forbidden"), errors[0])
+        raise ConfigError(describe_error(first, data)) from None
     try:
         geometry.SCENES[config.scene.kind].check(config)
     except ValueError as err:
@@ -198,9 +201,13 @@ def keys() -> list[Key]:
             every = len(having) == len(members) or name == "kind"
             key = _key(f"{section}.{name}", holders[0], name, () if every else having, members if name == "kind"
                        else None)
-            defaults = [_key(key.name, m, name, ()).default for m in holders]
-            if len(set(defaults)) > 1:  # a default of each kind
-                key = dataclasses.replace(key, default="; ".join(f"{k}: {d}" for k, d in zip(having, defaults)))
+            each = [_key(key.name, m, name, ()) for m in holders]
+            kinds_having = [_kind_of(m) for m in holders] if len(members) > 1 else having
+            for part in ("default", "doc"):  # one of each kind where the kinds differ
+                values = [getattr(k, part) for k in each]
+                if len(set(values)) > 1:
+                    joined = "; ".join(f"{kind}: {value}" for kind, value in zip(kinds_having, values))
+                    key = dataclasses.replace(key, **{part: joined})
             out.append(key)
     return out
 

@@ -37,7 +37,7 @@ class Stopped(Exception):
     def __str__(self) -> str:
         return self.message
 
-    def add_note(self, text: str) -> None:
+    def add_kept(self, text: str) -> None:
         """Append ``text`` (what was kept for a resume) to the one line."""
         self.message += text
 
@@ -78,6 +78,7 @@ class StopOnSignals:
 
     @contextlib.contextmanager
     def hold(self):
+        """Within the block a stop signal is only noted; it raises when the block ends."""
         self.holding += 1
         try:
             yield
@@ -90,7 +91,7 @@ class StopOnSignals:
         if kind is None and self.once_done is not None:
             self.once_done.take(self.previous)
         else:
-            _restore(self.previous)
+            restore(self.previous)
         return False
 
 
@@ -103,21 +104,23 @@ class IgnoredOnceDone:
         self.saved: dict = {}
 
     def take(self, handlers: dict) -> None:
-        """Ignore the stop signals whose handlers are ``handlers``; restore those on exit."""
-        self.saved = dict(handlers)
-        for signum in handlers:
+        """Ignore the stop signals whose handlers are ``handlers``; restore those on exit (the
+        first handlers given for a signal, when several runs hand theirs over)."""
+        for signum, handler in handlers.items():
+            self.saved.setdefault(signum, handler)
             signal.signal(signum, signal.SIG_IGN)
 
     def __enter__(self) -> "IgnoredOnceDone":
         return self
 
     def __exit__(self, *exc) -> bool:
-        _restore(self.saved)
+        restore(self.saved)
         self.saved = {}
         return False
 
 
-def _restore(handlers: dict) -> None:
+def restore(handlers: dict) -> None:
+    """Put back signal handlers by signal (those :func:`die_on_stop_signals` replaced)."""
     for signum, handler in handlers.items():
         signal.signal(signum, handler)
 
@@ -131,17 +134,13 @@ def die_on_stop_signals() -> dict:
     compiler, seen to let a run go on to its end)."""
     if not _main_thread():
         return {}
-    defaults = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL, signal.SIGHUP: signal.SIG_DFL}
+    defaults = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL,
+                signal.SIGHUP: signal.SIG_DFL}
     installed = {}
     for signum, default in defaults.items():
         if signal.getsignal(signum) is default:
             installed[signum] = signal.signal(signum, _stop_now)
     return installed
-
-
-def restore(handlers: dict) -> None:
-    """Put back the signal handlers :func:`die_on_stop_signals` replaced."""
-    _restore(handlers)
 
 
 def _stop_now(signum, frame):
@@ -165,7 +164,7 @@ def die_of(signum: int) -> None:
 def blocked_in_new_threads():
     """Threads started within the block never take SIGINT (they inherit this thread's mask);
     a SIGINT that comes meanwhile waits, and reaches this thread when the block ends."""
-    if threading.current_thread() is not threading.main_thread():
+    if not _main_thread():
         yield
         return
     previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})

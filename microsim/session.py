@@ -19,7 +19,6 @@ run that could not finish (exit 1: what was kept is said), :class:`Stopped` for 
 from __future__ import annotations
 
 import copy
-import csv
 import math
 import os
 import re
@@ -48,7 +47,9 @@ ENERGY_CAUSES = {"transmitted": "left through the bottom of the scene (a deeper 
 
 class RunRefused(ValueError):
     """Input that cannot be traced: one line naming the key or option and what is accepted.
-    Nothing was traced, and no table or kept unit was touched."""
+    Refused before anything is traced and before any table or kept unit is touched, but for
+    what shows only while tracing (a Dask scheduler that cannot be reached, a table's name taken
+    meanwhile: the line then says what was kept)."""
 
 
 class RunFailed(RuntimeError):
@@ -75,6 +76,8 @@ class Options:
                 raise RunRefused(f"--{name} {value!r}: expected an integer in [1, {top}]")
         if self.executor not in EXECUTORS:
             raise RunRefused(f"--executor {self.executor!r}: accepted: {', '.join(EXECUTORS)}")
+        if self.scheduler is not None and not isinstance(self.scheduler, str):
+            raise RunRefused(f"--scheduler {self.scheduler!r}: expected an address as text, e.g. tcp://10.0.0.5:8786")
         if self.scheduler is not None and self.executor != "dask":
             raise RunRefused("--scheduler: a Dask scheduler's address is taken with --executor dask only")
         if self.executor == "dask":
@@ -102,10 +105,10 @@ class RunOutcome:
 
     @property
     def paths_per_second(self) -> float:
-        """Paths traced (not resumed) per second of tracing."""
+        """Paths traced (not resumed) per second of tracing; NaN where nothing was traced."""
         first = self.results[0]
         traced = self.plan.paths * self.plan.n_incidences * first.units_traced / len(self.plan.units)
-        return traced / first.wall_time
+        return traced / first.wall_time if traced and first.wall_time > 0 else math.nan
 
     def albedo_summary(self, result) -> str:
         """The albedo of every incidence with its standard error, named by theta_i (and phi_i
@@ -123,8 +126,8 @@ class RunOutcome:
         substitutions), then where the tables went."""
         plan, results, first = self.plan, self.results, self.results[0]
         summaries = [self.albedo_summary(result) for result in results]
-        timing = (f"{first.wall_time:.1f} s, {self.paths_per_second:.3g} paths/s, {self.options.where(plan)}, "
-                  f"backend {plan.backend}")
+        rate = f"{self.paths_per_second:.3g} paths/s, " if first.units_traced else ""
+        timing = f"{first.wall_time:.1f} s, {rate}{self.options.where(plan)}, backend {plan.backend}"
         if first.units_resumed:
             timing += f"; {first.units_resumed} of {len(plan.units)} units resumed, {first.units_traced} traced"
         if len(results) == 1:
@@ -157,18 +160,25 @@ class RunOutcome:
 
 @dataclass
 class PointOutcome:
-    """One point of a sweep: its table, and its run (None where ``resume`` kept its table)."""
+    """One point of a sweep: its table and its albedos; ``summary`` and ``wall_time`` of its run
+    ("" and 0 where ``resume`` kept its table). The tables hold the rest: a sweep keeps no
+    point's estimates in memory."""
 
     point: object  # microsim.sweep.Point
     table: Path
-    run: RunOutcome | None
+    albedo: list[float]  # per incidence, all orders
+    summary: str = ""
+    wall_time: float = 0.0
+
+    @property
+    def kept(self) -> bool:
+        return not self.summary
 
     def line(self) -> str:
         """What ``microsim run`` prints as the point ends."""
-        if self.run is None:
+        if self.kept:
             return f"{self.point.name}: kept (its table was finished)"
-        result = self.run.results[0]
-        return f"{self.point.name}: albedo {self.run.albedo_summary(result)} | {result.wall_time:.1f} s"
+        return f"{self.point.name}: albedo {self.summary} | {self.wall_time:.1f} s"
 
 
 @dataclass
@@ -180,11 +190,13 @@ class SweepOutcome:
 
     @property
     def index(self) -> Path:
+        """The sweep's index.csv."""
         from . import sweep
 
         return self.directory / sweep.INDEX
 
     def report(self) -> list[str]:
+        """The line ``microsim run`` prints once the sweep is done."""
         from . import sweep
 
         return [f"{len(self.points)} tables and {sweep.INDEX} written to {self.directory}"]
@@ -211,11 +223,11 @@ def run(config, out=None, *, progress: Progress | None = None, on_point=None, on
     Raises :class:`RunRefused`, :class:`RunFailed` or :class:`Stopped` (one line each)."""
     from . import config as config_module, sweep
 
-    given = {key: value for key, value in options.items() if value is not None}
-    unknown = sorted(set(given) - set(OVERRIDES) - set(Options.__dataclass_fields__))
+    unknown = sorted(set(options) - set(OVERRIDES) - set(Options.__dataclass_fields__))
     if unknown:
         raise RunRefused(f"{unknown[0]}: not an option of a run; accepted: "
                          f"{', '.join((*OVERRIDES, *Options.__dataclass_fields__))}")
+    given = {key: value for key, value in options.items() if value is not None}
     overrides = {f"run.{key}": given.pop(key) for key in OVERRIDES if key in given}
     options = Options(**given)
     config_path = Path(config) if isinstance(config, (str, os.PathLike)) else None
@@ -287,7 +299,7 @@ def _run_sweep(points, out_dir: Path, options: Options, config_path: Path | None
     With resume, a point whose table is there (made from the same config) is kept as it is, and
     the point that was interrupted resumes from its units. Every point is planned and checked
     before anything is traced."""
-    from . import unit_store
+    from . import sweep, unit_store
 
     for point in points:
         _refuse_input(out_dir / f"{point.name}.h5", config_path)
@@ -318,22 +330,24 @@ def _run_sweep(points, out_dir: Path, options: Options, config_path: Path | None
             for p in points]
     for row, plan, table in zip(rows, plans, kept):
         if table is not None:
-            _index_albedos(row, plan, table.arrays["albedo"])
-    _write_index(out_dir, rows)
+            sweep.index_albedos(row, plan.theta_i, table.arrays["albedo"])
+    sweep.write_index(out_dir, rows)
     outcome = SweepOutcome(out_dir)
-    for row, point, plan, table in zip(rows, points, plans, kept):
+    last_traced = max((n for n, table in enumerate(kept) if table is None), default=None)
+    for n, (row, point, plan, table) in enumerate(zip(rows, points, plans, kept)):
         path = out_dir / row["table"]
         if table is not None:
             unit_store.UnitStore(unit_store.store_path(path), {}).clear()  # outlived its table
-            done = PointOutcome(point, path, None)
+            done = PointOutcome(point, path, list(table.arrays["albedo"]))
         else:
-            last = point is points[-1]
             _check_writable(path, options.force)
-            run = _trace(point.config, plan, [path], path, options, progress, label=f"sweep point {point.name}: ",
-                         once_done=once_done if last else None)
-            _index_albedos(row, plan, [a.mean[RESULT_ALL_ORDERS] for a in run.results[0].albedo])
-            _write_index(out_dir, rows)
-            done = PointOutcome(point, path, run)
+            traced = _trace(point.config, plan, [path], path, options, progress,
+                            label=f"sweep point {point.name}: ", once_done=once_done if n == last_traced else None)
+            result = traced.results[0]
+            done = PointOutcome(point, path, [a.mean[RESULT_ALL_ORDERS] for a in result.albedo],
+                                traced.albedo_summary(result), result.wall_time)
+            sweep.index_albedos(row, plan.theta_i, done.albedo)
+            sweep.write_index(out_dir, rows)
         outcome.points.append(done)
         if on_point is not None:
             on_point(done)
@@ -357,30 +371,11 @@ def _finished_table(path: Path, point):
     return table
 
 
-def _index_albedos(row: dict, plan, albedos) -> None:
-    row["status"] = "done"
-    for t, a in zip(plan.theta_i, albedos):
-        row[f"albedo_theta{math.degrees(t):g}"] = f"{a:.6g}"
-
-
-def _write_index(out_dir: Path, rows) -> None:
-    """index.csv of a sweep, replaced atomically."""
-    from . import sweep
-
-    columns = list(dict.fromkeys(key for row in rows for key in row))
-    tmp = out_dir / f".{sweep.INDEX}.tmp"
-    with open(tmp, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, columns, restval="")
-        writer.writeheader()
-        writer.writerows(rows)
-    os.replace(tmp, out_dir / sweep.INDEX)
-
-
-def _trace(config, plan, outs, table: Path, options: Options, progress: Progress, label: str = "",
+def _trace(config, plan, outs, store_table: Path, options: Options, progress: Progress, label: str = "",
            once_done=None) -> RunOutcome:
     """Trace a planned and checked config (its memory, its tables' names) and write its tables
-    (one per albedo) to ``outs``; finished units are kept in the unit store of ``table`` until
-    the tables are written. A failure or a signal says in its one line how many units were kept
+    (one per albedo) to ``outs``; finished units are kept in the unit store named after
+    ``store_table`` until the tables are written. A failure or a signal says in its one line how many units were kept
     for resume; a refusal keeps them all.
 
     The store is checked and the tracer compiled before the store is touched: a refusal costs no
@@ -388,7 +383,7 @@ def _trace(config, plan, outs, table: Path, options: Options, progress: Progress
     from . import embree, executors, runner, tables, unit_store
     from .compile_watch import CompileWatch
 
-    directory = unit_store.store_path(table)
+    directory = unit_store.store_path(store_table)
     try:
         kept = unit_store.UnitStore.check(directory, plan, options.resume, options.force).saved_units()
     except unit_store.StoreMismatch as err:
@@ -408,7 +403,9 @@ def _trace(config, plan, outs, table: Path, options: Options, progress: Progress
                     results = runner.trace(plan, options.workers, progress.unit, options.executor, options.scheduler,
                                            store)
                     with guard.hold():
-                        _write_tables(outs, results, config, options, store, plan, label)
+                        refused = _write_tables(outs, results, config, options, store, plan, label)
+                    if refused:  # after the hold: a signal that came meanwhile is said first
+                        raise refused[0]
                 except (embree.EmbreeUnavailable, executors.WorkerFailed, unit_store.UnitNotSaved) as err:
                     raise RunFailed(f"{label}{err}{_kept(store, plan)}") from None
                 except (executors.SchedulerUnreachable, runner.PlanError) as err:
@@ -417,7 +414,7 @@ def _trace(config, plan, outs, table: Path, options: Options, progress: Progress
                     raise RunRefused(f"--out: {err}") from None
                 except Stopped as stop:
                     if store.directory.exists():
-                        stop.add_note(_kept(store, plan))
+                        stop.add_kept(_kept(store, plan))
                     raise
                 finally:
                     store.release()
@@ -426,13 +423,13 @@ def _trace(config, plan, outs, table: Path, options: Options, progress: Progress
     return RunOutcome(config, plan, list(outs), results, watch.seconds, options)
 
 
-def _write_tables(outs, results, config, options: Options, store, plan, label: str) -> None:
+def _write_tables(outs, results, config, options: Options, store, plan, label: str) -> list:
     """Write every table, then clear the store; a table whose name was taken meanwhile is kept
-    under a fresh name, and the first such refusal raised once all are written."""
+    under a fresh name, and the refusals (tables.TableExists) returned."""
     from . import tables
 
     refused = []
-    for path, result in zip(outs, results):
+    for path, result in zip(outs, results, strict=True):
         try:
             tables.write(path, result, config, overwrite=options.force)
         except tables.TableExists as err:
@@ -441,8 +438,7 @@ def _write_tables(outs, results, config, options: Options, store, plan, label: s
             raise RunFailed(f"{label}cannot write the table {path}: {err.strerror or err}{_free_space(path)}"
                             f"{_kept(store, plan)}") from None
     store.clear()
-    if refused:
-        raise refused[0]
+    return refused
 
 
 def _free_space(path: Path) -> str:

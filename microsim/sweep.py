@@ -15,9 +15,13 @@ point: its values, table, status and albedo per incidence.
 from __future__ import annotations
 
 import copy
+import csv
 import itertools
+import math
+import os
 import re
 from dataclasses import dataclass
+from pathlib import Path
 
 from . import config as config_module
 from .config import ConfigError
@@ -91,6 +95,25 @@ def points(data: dict) -> list[Point] | None:
     if len(set(names)) != len(names):
         raise ConfigError("sweep: two points have the same values (a value is listed twice)")
     return out
+
+
+def index_albedos(row: dict, theta_i, albedos) -> None:
+    """Mark a point's row of the index done, with its albedo at each theta_i (radians)."""
+    row["status"] = "done"
+    for t, a in zip(theta_i, albedos):
+        row[f"albedo_theta{math.degrees(t):g}"] = f"{a:.6g}"
+
+
+def write_index(directory: Path, rows) -> None:
+    """The sweep's INDEX in ``directory``, one row a point (values, table, status, albedos),
+    replaced atomically."""
+    columns = list(dict.fromkeys(key for row in rows for key in row))
+    tmp = directory / f".{INDEX}.tmp"
+    with open(tmp, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, columns, restval="")
+        writer.writeheader()
+        writer.writerows(rows)
+    os.replace(tmp, directory / INDEX)
 
 
 def keys() -> list[config_module.Key]:

@@ -3,8 +3,8 @@ meaning (conventions §6).
 
 The core datasets (incidences, sensor, energy, paths, diagnostics) are declared here, and each
 estimator declares its own (``Estimator.DATASETS``, :mod:`microsim.estimators`): the loader's
-shape checks (:data:`microsim.tables.AXES`, :data:`~microsim.tables.REQUIRED`) and the
-reference page of the documentation are derived from :func:`datasets`. ``FORMAT_VERSION`` is
+shape checks and the reference page of the documentation derive from the two together
+(:data:`microsim.tables.DATASETS`). A leaf module: it imports only the tally's names. ``FORMAT_VERSION`` is
 written into every table; it changes when a dataset changes meaning or shape (adding one does
 not).
 """
@@ -15,7 +15,8 @@ from dataclasses import dataclass
 
 from .tally import COUNT_NAMES, ENERGY_NAMES
 
-#: the version of the layout, written as the ``format_version`` attribute of every table
+#: the version of the layout, written as the ``format_version`` attribute of every table; a
+#: table of another major version is refused by the loader (a table without one is 1.0)
 FORMAT_VERSION = "1.0"
 
 
@@ -35,11 +36,12 @@ class Dataset:
 
 @dataclass(frozen=True)
 class Attribute:
-    """One attribute of the file's root group."""
+    """One attribute: of the file's root group unless ``group`` says where."""
 
     name: str
     doc: str
     when: str = "always"
+    group: str = "/"
 
 
 #: the lengths the axes name
@@ -49,7 +51,6 @@ AXIS_LENGTHS = {
     "orders": "4: scattering orders 1, 2, 3 and 4 or more",
     "retro_rings": "n_r = sensor.retro_rings",
     "xyz": "3: the components of a unit vector",
-    "rings": "the sensor's rings of cells, from the pole",
 }
 
 ATTRIBUTES = (
@@ -68,6 +69,9 @@ ATTRIBUTES = (
     Attribute("backend_fallback", "what the backend substituted, and why (\"\" if nothing)"),
     Attribute("albedos_traced_together", "the material albedos traced in one run", "a table of an albedo list"),
     Attribute("albedo_traced", "the albedo the paths were traced at (the largest)", "a table of an albedo list"),
+    Attribute("cells_requested", "sensor.cells as the config asked (the sensor's actual cells: the datasets' "
+              "length)", group="sensor"),
+    Attribute("sha256", "the SHA-256 of the dataset's bytes, checked by microsim.tables.load", group="every dataset"),
 )
 
 _ENERGY_DOCS = {
@@ -106,9 +110,3 @@ CORE = (
             "group's attributes hold the resolved scene parameters and the largest triangle count"),
 )
 
-
-def datasets() -> tuple[Dataset, ...]:
-    """Every dataset a table may hold: the core ones, then each registered estimator's."""
-    from . import estimators
-
-    return CORE + tuple(d for name in estimators.ESTIMATORS for d in estimators.get(name).DATASETS)

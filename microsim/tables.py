@@ -1,8 +1,8 @@
 """HDF5 reference tables (conventions §6): atomic writer and a checking reader.
 
 The layout (every attribute and dataset, its axes, unit and meaning) is declared in
-:mod:`microsim.table_layout`, from which the loader's checks below and the documentation's
-table-format page are derived.
+:mod:`microsim.table_layout` and by each estimator (:data:`DATASETS`), from which the loader's
+checks below and the documentation's table-format page are derived.
 
 Every dataset carries a Fletcher-32 checksum and the file is written in the HDF5 1.10 format,
 whose metadata (headers, chunk indexes) carry checksums too, so damaged bytes fail on reading.
@@ -26,7 +26,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from . import __version__, table_layout
+from . import __version__, estimators, table_layout
 from .frames import direction
 from .orders import ORDERS
 from .sensor import Sensor
@@ -211,11 +211,12 @@ class TableError(ValueError):
     """A damaged, incomplete or inconsistent table; the message is one line naming the dataset."""
 
 
-#: axes of every dataset whose shape is known, by HDF5 path (microsim.table_layout)
-AXES = {d.name: d.axes for d in table_layout.datasets() if d.axes is not None}
-#: datasets every table has (microsim.table_layout): brdf_order1_base only where there is a base,
-#: so it is checked when present
-REQUIRED = tuple(d.name for d in table_layout.datasets() if d.required)
+#: every dataset a table may hold (microsim.table_layout): the core ones, then each estimator's
+DATASETS = table_layout.CORE + estimators.datasets()
+#: axes of every dataset whose shape is known, by HDF5 path
+AXES = {d.name: d.axes for d in DATASETS if d.axes is not None}
+#: datasets every table has: brdf_order1_base only where there is a base, so it is checked when present
+REQUIRED = tuple(d.name for d in DATASETS if d.required)
 
 
 def load(path: str | Path) -> Table:
@@ -234,6 +235,10 @@ def load(path: str | Path) -> Table:
             raise TableError(f"HDF5 structure is damaged ({err})") from None
     if "microsim_version" not in attrs or "config_toml" not in attrs:
         raise TableError("not a microsim table (no microsim_version and config_toml attributes)")
+    version = str(attrs.get("format_version", "1.0"))
+    if version.split(".")[0] != table_layout.FORMAT_VERSION.split(".")[0]:
+        raise TableError(f"format_version {version}: this microsim reads tables of format "
+                         f"{table_layout.FORMAT_VERSION.split('.')[0]}.x")
     if scene is None:
         raise TableError("scene is missing")
     _check(arrays)

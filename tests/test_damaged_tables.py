@@ -92,8 +92,11 @@ def move_a_cell_between_rings(h5):
     (move_a_cell_between_rings, "sensor/theta_lo disagrees with sensor/ring_counts (cell 7:"),
     (lambda h5: h5.attrs.__delitem__("microsim_version"),
      "not a microsim table (no microsim_version and config_toml attributes)"),
+    (lambda h5: h5.attrs.__setitem__("format_version", "2.0"),
+     "format_version 2.0: this microsim reads tables of format 1.x"),
 ], ids=["no brdf_order_stderr", "no albedo_order", "brdf of the wrong shape", "NaN in brdf", "theta beyond pi/2",
-        "negative brdf_stderr", "negative albedo", "ring counts against bounds", "no microsim_version"])
+        "negative brdf_stderr", "negative albedo", "ring counts against bounds", "no microsim_version",
+        "a later format"])
 def test_a_damaged_table_gives_one_line_naming_the_dataset(good_table, tmp_path, capsys, damage, expected):
     cells = tables.load(good_table).sensor.n_cells
     path = damaged_copy(good_table, tmp_path, damage)

@@ -33,7 +33,7 @@ def site_text(tmp_path_factory) -> str:
 
 
 def test_every_cli_option_config_key_model_and_dataset_is_in_the_docs(site_text):
-    from microsim import cli, config, models, sweep, table_layout
+    from microsim import cli, config, models, sweep, table_layout, tables
 
     words = set(re.findall(r"[^\s,;()\[\]]+", site_text))
     missing = [f"microsim {name}" for name in cli.cli.commands if f"microsim {name}" not in site_text]
@@ -42,7 +42,7 @@ def test_every_cli_option_config_key_model_and_dataset_is_in_the_docs(site_text)
                     if param.param_type_name == "option" and opt not in words]
     missing += [key.name for key in config.keys() + sweep.keys() if key.name not in site_text]
     missing += [name for name in models.available() if name not in words]
-    missing += [d.name for d in table_layout.datasets() if d.name not in words]
+    missing += [d.name for d in tables.DATASETS if d.name not in words]
     missing += [a.name for a in table_layout.ATTRIBUTES if a.name not in words]
     assert missing == []
 

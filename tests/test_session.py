@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from microsim import session
+from microsim import session, tables
 from microsim.cli import main
 from microsim.progress import Progress
 from test_cli_run import SPHERES
@@ -17,15 +17,24 @@ from test_sweep import GRID, same_table
 
 
 def test_a_run_from_python_is_the_command_line_s_table(tmp_path, capsys):
+    """The command line runs the session too: both are also checked against the runner's
+    tables written without it."""
+    from microsim import config as config_module, runner
+
     config = tmp_path / "small.toml"
     config.write_text(SPHERES)
     outcome = session.run(config, tmp_path / "python.h5", workers=2)
     assert main(["run", str(config), "--out", str(tmp_path / "cli.h5")]) == 0
+    validated = config_module.load(config)
+    tables.write(tmp_path / "runner.h5", runner.run_albedos(validated)[0], validated)
     assert outcome.tables == [tmp_path / "python.h5"]
     assert same_table(tmp_path / "python.h5", tmp_path / "cli.h5")
-    printed = capsys.readouterr().out.splitlines()
-    report = outcome.report()  # the lines the command prints, but for the time and where it ran
-    assert [line.split(" | ")[0] for line in report[:-1]] == [line.split(" | ")[0] for line in printed[:-1]]
+    assert same_table(tmp_path / "python.h5", tmp_path / "runner.h5")
+    def lines(text):  # but for the time, where it ran, and compiling (the first run of a process compiles)
+        return [line.split(" | ")[0] for line in text[:-1] if not line.startswith("compiled the tracer")]
+
+    report = outcome.report()
+    assert lines(report) == lines(capsys.readouterr().out.splitlines())
     assert report[-1] == f"table written to {tmp_path / 'python.h5'}"
 
 
@@ -68,7 +77,11 @@ def test_a_sweep_from_python_is_the_command_line_s(tmp_path):
         assert same_table(tmp_path / "python" / name, tmp_path / "cli" / name), name
     assert [p.table for p in points] == [p.table for p in outcome.points]
     with open(outcome.index) as a, open(tmp_path / "cli" / "index.csv") as b:
-        assert list(csv.DictReader(a)) == list(csv.DictReader(b))
+        rows = list(csv.DictReader(a))
+        assert rows == list(csv.DictReader(b))
+    for row in rows:  # each point done, with its table's albedos
+        albedo = tables.load(tmp_path / "python" / row["table"]).albedo
+        assert row["status"] == "done" and [row["albedo_theta0"], row["albedo_theta60"]] == [f"{a:.6g}" for a in albedo]
     units = [(r, i) for r in range(2) for i in range(2)]
     assert progress.events == 6 * ["start", "tracing", *units, "stop"]
 

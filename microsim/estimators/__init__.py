@@ -93,6 +93,11 @@ def get(name: str) -> type[Estimator]:
     return getattr(importlib.import_module(module), cls)
 
 
+def datasets() -> tuple:
+    """The datasets every registered estimator may write (``Estimator.DATASETS``), in order."""
+    return tuple(dataset for name in ESTIMATORS for dataset in get(name).DATASETS)
+
+
 def names_for(config) -> tuple[str, ...]:
     """The estimators a run of ``config`` uses."""
     return tuple(name for name in ESTIMATORS if get(name).wanted(config))

@@ -18,8 +18,8 @@ import numpy as np
 
 from ..orders import ORDERS, RESULT_ALL_ORDERS, RESULT_ORDER1_BASE, RESULT_ORDERS12, RESULT_ROWS
 from ..sensor import cell_index, retro_ring
-from . import Estimator
 from ..table_layout import Dataset
+from . import Estimator
 from .hooks import ON_EXIT
 
 #: the row of the tally after the orders: order-1 exits scattered by the base plane
@@ -39,37 +39,41 @@ class ExitBins(Estimator):
 
     name = "exit_bins"
     Record = ExitBinsTally
-    DATASETS = (
-        *(Dataset(f"{name}{suffix}", axes, unit, f"{doc}{' (its standard error)' if suffix else ''}", when,
-                  required)
-          for name, axes, unit, doc, when, required in (
-              ("brdf", ("incidences", "cells"), "1/sr", "f_C = E_C / P_C: the BRDF averaged over each cell, "
-               "cos-weighted, all orders", "always", True),
-              ("brdf_order", ("incidences", "orders", "cells"), "1/sr", "f_C by scattering order 1, 2, 3, 4+ "
-               "(they sum to brdf)", "always", True),
-              ("brdf_orders12", ("incidences", "cells"), "1/sr", "orders 1 and 2 together (the f2 of two-bounce "
-               "models), its error from the per-realization sums", "always", False),
-              ("brdf_order1_base", ("incidences", "cells"), "1/sr", "the part of order 1 that the base plane "
-               "scattered", "scenes with a base", False),
-              ("albedo", ("incidences",), "", "directional albedo: the energy that left through the top",
-               "always", True),
-              ("albedo_order", ("incidences", "orders"), "", "albedo by scattering order", "always", True),
-              ("albedo_orders12", ("incidences",), "", "albedo of orders 1 and 2 together", "always", False),
-              ("albedo_order1_base", ("incidences",), "", "albedo of the base's part of order 1",
-               "scenes with a base", False),
-              ("brdf_retro", ("incidences", "retro_rings"), "1/sr", "f averaged (cos-weighted) over each ring "
-               "about the retro direction, all orders", "sensor.retro_rings > 0", False),
-              ("brdf_retro_order", ("incidences", "orders", "retro_rings"), "1/sr", "brdf_retro by order",
-               "sensor.retro_rings > 0", False),
-          )
-          for suffix in ("", "_stderr")),
-        *(Dataset(f"sensor/{name}", ("retro_rings",), "rad", doc, "sensor.retro_rings > 0") for name, doc in (
-            ("retro_gamma_lo", "lower phase-angle bound of each retro ring (widths nearly equal, uniform in the "
-                               "chord 2 sin(gamma / 2))"),
-            ("retro_gamma_hi", "upper phase-angle bound of each retro ring"))),
+    DATASETS = tuple(
+        dataset
+        for name, axes, unit, doc, when, required in (
+            ("brdf", ("incidences", "cells"), "1/sr", "f_C = E_C / P_C: the BRDF averaged over each cell, "
+             "cos-weighted, all orders", "always", True),
+            ("brdf_order", ("incidences", "orders", "cells"), "1/sr", "f_C by scattering order 1, 2, 3, 4+ (they "
+             "sum to brdf)", "always", True),
+            ("brdf_orders12", ("incidences", "cells"), "1/sr", "orders 1 and 2 together (the f2 of two-bounce "
+             "models)", "always", False),
+            ("brdf_order1_base", ("incidences", "cells"), "1/sr", "the part of order 1 that the base plane scattered",
+             "scenes with a base", False),
+            ("albedo", ("incidences",), "", "directional albedo: the energy that left through the top", "always",
+             True),
+            ("albedo_order", ("incidences", "orders"), "", "albedo by scattering order", "always", True),
+            ("albedo_orders12", ("incidences",), "", "albedo of orders 1 and 2 together", "always", False),
+            ("albedo_order1_base", ("incidences",), "", "albedo of the base's part of order 1", "scenes with a base",
+             False),
+            ("brdf_retro", ("incidences", "retro_rings"), "1/sr", "f averaged (cos-weighted) over each ring about "
+             "the retro direction, all orders", "sensor.retro_rings > 0", False),
+            ("brdf_retro_order", ("incidences", "orders", "retro_rings"), "1/sr", "brdf_retro by order",
+             "sensor.retro_rings > 0", False),
+        )
+        for dataset in (
+            Dataset(name, axes, unit, doc, when=when, required=required),
+            Dataset(f"{name}_stderr", axes, unit, f"standard error of {name}, from the spread of the realizations",
+                    when=when, required=required),
+        )
+    ) + (
+        Dataset("sensor/retro_gamma_lo", ("retro_rings",), "rad", "lower phase-angle bound of each retro ring "
+                "(widths nearly equal, uniform in the chord 2 sin(gamma / 2))", when="sensor.retro_rings > 0"),
+        Dataset("sensor/retro_gamma_hi", ("retro_rings",), "rad", "upper phase-angle bound of each retro ring",
+                when="sensor.retro_rings > 0"),
         Dataset("sensor/retro_projected_solid_angle", ("incidences", "retro_rings"), "sr",
                 "projected solid angle of each retro ring about each incidence (rings the horizon cuts included)",
-                "sensor.retro_rings > 0"),
+                when="sensor.retro_rings > 0"),
     )
 
     def shapes(self):
