@@ -187,32 +187,32 @@ class Key:
 
 def keys() -> list[Key]:
     """Every key of a run's config, read from the schema (the same source as validation); the
-    keys of ``[sweep]``: :func:`microsim.sweep.keys`."""
-    out = [_key("name", Config, "name", ())]
+    keys of ``[sweep]``: :func:`microsim.sweep.keys`. A key that only some kinds of a section
+    have names them, and its default and meaning are given per kind where the kinds differ."""
+    out = [_key("name", Config, "name")]
     for section, model in (("scene", Scene), ("material", AnyMaterial), ("base", AnyMaterial),
                            ("illumination", Illumination), ("sensor", SensorSection), ("run", Run)):
         members = _union_members(model) or [model]
-        kinds: dict[str, list[str]] = {}
-        for member in members:
-            for name in member.model_fields:
-                kinds.setdefault(name, []).append(_kind_of(member) if len(members) > 1 else "")
-        for name, having in kinds.items():
+        names = dict.fromkeys(name for member in members for name in member.model_fields)
+        for name in names:
             holders = [m for m in members if name in m.model_fields]
-            every = len(having) == len(members) or name == "kind"
-            key = _key(f"{section}.{name}", holders[0], name, () if every else having, members if name == "kind"
-                       else None)
-            each = [_key(key.name, m, name, ()) for m in holders]
-            kinds_having = [_kind_of(m) for m in holders] if len(members) > 1 else having
-            for part in ("default", "doc"):  # one of each kind where the kinds differ
-                values = [getattr(k, part) for k in each]
-                if len(set(values)) > 1:
-                    joined = "; ".join(f"{kind}: {value}" for kind, value in zip(kinds_having, values))
-                    key = dataclasses.replace(key, **{part: joined})
-            out.append(key)
+            if name == "kind":  # every member's tag
+                out.append(_key(f"{section}.kind", holders[0], name, members))
+                continue
+            each = [_key(f"{section}.{name}", m, name) for m in holders]
+            tags = [_kind_of(m) for m in holders] if len(members) > 1 else [""]
+            out.append(dataclasses.replace(
+                each[0], kinds="" if len(holders) == len(members) else ", ".join(tags),
+                default=_per_kind(tags, [k.default for k in each]), doc=_per_kind(tags, [k.doc for k in each])))
     return out
 
 
-def _key(dotted: str, model, name: str, kinds, members=None) -> Key:
+def _per_kind(tags: list[str], values: list[str]) -> str:
+    """The one value, or each kind's where they differ."""
+    return values[0] if len(set(values)) == 1 else "; ".join(f"{tag}: {value}" for tag, value in zip(tags, values))
+
+
+def _key(dotted: str, model, name: str, members=None) -> Key:
     info = model.model_fields[name]
     if members is not None:  # the kind: every member's tag
         accepted = ", ".join(repr(_kind_of(m)) for m in members)
@@ -223,7 +223,7 @@ def _key(dotted: str, model, name: str, kinds, members=None) -> Key:
     else:
         default = repr(info.default) if info.default is not None else "unset"
     doc = info.description or ("the kind: which of the kinds named under accepted" if name == "kind" else "")
-    return Key(dotted, ", ".join(kinds), accepted, default, doc)
+    return Key(dotted, "", accepted, default, doc)
 
 
 def describe_error(error: dict, data: dict) -> str:
