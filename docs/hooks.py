@@ -40,7 +40,7 @@ def table_format_page() -> str:
     lines = [f"Format version: **{table_layout.FORMAT_VERSION}** (the `format_version` attribute).", "",
              "### Attributes", "", "| attribute | of | meaning | present |", "|---|---|---|---|"]
     lines += [f"| `{a.name}` | {'the file' if a.group == '/' else a.group} | {_cell(a.doc)} | {_cell(a.when)} |"
-              for a in table_layout.ATTRIBUTES]
+              for a in tables.ATTRIBUTES]
     lines += ["", "### Axes", "", "| axis | length |", "|---|---|"]
     lines += [f"| `{axis}` | {_cell(length)} |" for axis, length in table_layout.AXIS_LENGTHS.items()]
     lines += ["", "### Datasets", "", "| dataset | axes | unit | meaning | present | required |",

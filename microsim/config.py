@@ -25,6 +25,7 @@ import geometry
 
 from .choices import BACKEND_CHOICES
 from .materials import MATERIALS
+from .sensor import MAX_POINTS
 from .schema import Section
 
 
@@ -77,6 +78,58 @@ class SensorSection(Section):
     retro_rings: int = Field(0, ge=0, le=100_000, description="rings about the retro direction, tallied "
                              "apart from the cells (0: none); see microsim.sensor")
     retro_max_deg: float = Field(10.0, gt=0.0, le=90.0, description="phase angle the retro rings reach, deg")
+    directions_deg: list[list[float]] = Field(
+        [], description="exact directions [theta_o, phi_o] (phi_o the relative azimuth), deg, theta_o in [0, 90), "
+                        f"phi_o in [-360, 360]: f there by next-event estimation (at most {MAX_POINTS} points "
+                        "with retro_points_deg)")
+    retro_points_deg: list[float] = Field(
+        [], description="phase angles gamma in [0, 90) deg from the retro direction, towards the normal in the "
+                        "plane of incidence: f there by next-event estimation")
+
+    @pydantic.field_validator("directions_deg", mode="before")
+    @classmethod
+    def _directions(cls, value):
+        """A list of [theta_o, phi_o] pairs of numbers, theta_o in [0, 90), phi_o in [-360, 360]."""
+        accepted = "accepted: a list of [theta_o, phi_o] pairs, theta_o in [0, 90) and phi_o in [-360, 360] deg"
+        if not isinstance(value, list):
+            raise ValueError(f"directions_deg = {excerpt(value)}: not a list; {accepted}")
+        for k, pair in enumerate(value):
+            if (not isinstance(pair, list) or len(pair) != 2
+                    or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in pair)):
+                raise ValueError(f"directions_deg[{k}] = {excerpt(pair)}: not a pair of numbers; {accepted}")
+            theta, phi = pair
+            if not 0.0 <= theta < 90.0:
+                where = "below the horizon" if theta >= 90.0 else "out of range"
+                raise ValueError(f"directions_deg[{k}] = {excerpt(pair)}: theta_o {where}; {accepted}")
+            if not -360.0 <= phi <= 360.0:
+                raise ValueError(f"directions_deg[{k}] = {excerpt(pair)}: phi_o out of range; {accepted}")
+        return [[float(theta), float(phi)] for theta, phi in value]
+
+    @pydantic.field_validator("retro_points_deg", mode="before")
+    @classmethod
+    def _retro_points(cls, value):
+        """A list of numbers in [0, 90)."""
+        accepted = "accepted: a list of phase angles in [0, 90) deg"
+        if not isinstance(value, list) or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value):
+            raise ValueError(f"retro_points_deg = {excerpt(value)}: not a list of numbers; {accepted}")
+        for k, gamma in enumerate(value):
+            if not 0.0 <= gamma < 90.0:
+                raise ValueError(f"retro_points_deg[{k}] = {excerpt(gamma)}: out of range; {accepted}")
+        return [float(gamma) for gamma in value]
+
+    @pydantic.model_validator(mode="after")
+    def _at_most_max_points(self):
+        count = len(self.directions_deg) + len(self.retro_points_deg)
+        if count > MAX_POINTS:
+            raise ValueError(f"sensor.directions_deg: {len(self.directions_deg):,} directions and "
+                             f"{len(self.retro_points_deg):,} retro_points_deg, {count:,} points; accepted: at "
+                             f"most {MAX_POINTS} points together (each costs a shadow ray per scattering event)")
+        return self
+
+    @property
+    def n_points(self) -> int:
+        """Points of next-event estimation asked for (directions and retro points)."""
+        return len(self.directions_deg) + len(self.retro_points_deg)
 
 
 class Run(Section):
@@ -109,6 +162,19 @@ class Config(Section):
     illumination: Illumination
     sensor: SensorSection = SensorSection()
     run: Run
+
+    @pydantic.model_validator(mode="after")
+    def _points_see_light(self):
+        """Next-event estimation sees the lobes that are not a Dirac delta: a scene whose every
+        material reflects by delta lobes or absorbs has nothing to show it."""
+        materials = [self.material] + ([self.base] if self.base is not None else [])
+        if self.sensor.n_points and not any(m.continuous for m in materials):
+            kinds = ", ".join(f"{name}.kind = {m.kind!r}" for name, m in zip(("material", "base"), materials))
+            key = "sensor.directions_deg" if self.sensor.directions_deg else "sensor.retro_points_deg"
+            raise ValueError(f"{key}: next-event estimation sees no light in this scene ({kinds}: delta lobes "
+                             "or absorption only); accepted: a scene with a lambert or interfaced_lambert "
+                             "material, or no points (the cells see delta lobes)")
+        return self
 
 
 def load(path: str | Path, overrides: dict | None = None) -> Config:
@@ -245,7 +311,7 @@ def describe_error(error: dict, data: dict) -> str:
     kind = error["type"]
     if kind == "value_error":  # a rule of a section's own validator: its message is the line
         message = str(error["ctx"]["error"])
-        if len(keys) > 1 and message.startswith(keys[-1] + " "):  # a field's rule: add its section
+        if len(keys) > 1 and message.startswith((keys[-1] + " ", keys[-1] + "[")):  # a field's rule: add its section
             return ".".join(keys[:-1]) + "." + message
         return message
     shown = f" = {excerpt(value)}" if value is not None and not isinstance(value, dict) else ""

@@ -68,7 +68,7 @@ def trace_units(plan, units, emit) -> None:
             tracer = plan.tracer_class(scene, sensor, estimators=estimators, **plan.tracer_options)
             current = r
         tally = tracer.trace(plan.incidence_direction(i), plan.paths_per_realization, stream_key(seed, r, i),
-                             max_order, plan.albedo_scale)
+                             max_order, plan.albedo_scale, plan.phi_i[i])
         emit((r, i), tally, scene.info)
 
 

@@ -63,6 +63,11 @@ class Material(Section):
 
     code: ClassVar[int]
     example: ClassVar[dict]
+    #: what the kind reflects by Dirac delta lobes ("" if nothing): next-event estimation does not
+    #: see it (:func:`evaluate` leaves it out), the exit binning does
+    delta_lobes: ClassVar[str] = ""
+    #: whether the kind scatters into a continuum of directions (its ``lobes`` are not all 0)
+    continuous: ClassVar[bool] = True
 
     @classmethod
     def __pydantic_init_subclass__(cls, **kwargs):
@@ -138,6 +143,7 @@ class Absorber(Material):
     kind: Literal["absorber"]
     code: ClassVar[int] = 0
     example: ClassVar[dict] = {}
+    continuous: ClassVar[bool] = False
 
     def albedo_bound(self) -> float:
         return 0.0
@@ -212,6 +218,8 @@ class Conductor(Material):
     k: float = Field(ge=0.0, le=100.0, description="imaginary part of the complex index")
     code: ClassVar[int] = 2
     example: ClassVar[dict] = {"eta": 0.2, "k": 3.0}
+    delta_lobes: ClassVar[str] = "its mirror reflection (Fresnel-weighted)"
+    continuous: ClassVar[bool] = False
 
     def albedo_bound(self) -> float:
         cosines = np.linspace(0.0, 1.0, _CONDUCTOR_PROBES)
@@ -238,6 +246,7 @@ class InterfacedLambert(Material):
     eta: float = Field(ge=1.0, le=4.0, description="refractive index ratio n_i of the interface")
     code: ClassVar[int] = 3
     example: ClassVar[dict] = {"albedo": 0.7, "eta": 1.5}
+    delta_lobes: ClassVar[str] = "the mirror reflection of its smooth interface"
 
     def albedo_bound(self) -> float:
         f0 = fresnel_dielectric(1.0, self.eta)
@@ -272,6 +281,8 @@ class Mirror(Material):
     kind: Literal["mirror"]
     code: ClassVar[int] = 4
     example: ClassVar[dict] = {}
+    delta_lobes: ClassVar[str] = "its mirror reflection"
+    continuous: ClassVar[bool] = False
 
     @staticmethod
     def sample(prm, states, i, d, n):

@@ -73,6 +73,10 @@ class Plan:
                 raise PlanError(f"--threads {threads}: the embreex backend traces on one thread; use --workers")
             threads, notes = 1, notes + ["one thread (the embreex backend has no threads)"]
         generator = geometry.SCENES[config.scene.kind]
+        if config.sensor.n_points and backend == "embreex" and generator.INTEGRATOR == "surface":
+            key = "sensor.directions_deg" if config.sensor.directions_deg else "sensor.retro_points_deg"
+            raise PlanError(f"{key}: next-event estimation on {config.scene.kind} needs the direct backend (the "
+                            f"embreex backend has no visibility query){'; ' + notes[0] if notes else ''}")
         config, substitution = generator.for_backend(config, backend)
         notes += [substitution] if substitution else []
         return cls(config, generator.resolve(config), theta, phi, config.sensor.cells, run.realizations,
@@ -97,9 +101,10 @@ class Plan:
         return direction(self.theta_i[i], self.phi_i[i])
 
     def build_sensor(self) -> Sensor:
-        """The run's sensor: its cells, and its retro rings if the config asks for them."""
+        """The run's sensor: its cells, and its retro rings and points if the config asks for them."""
         section = self.config.sensor
-        return Sensor.build(self.sensor_cells).with_retro_rings(section.retro_rings, section.retro_max_deg)
+        return (Sensor.build(self.sensor_cells).with_retro_rings(section.retro_rings, section.retro_max_deg)
+                .with_points(section.directions_deg, section.retro_points_deg))
 
     @property
     def generator(self):

@@ -23,6 +23,15 @@ retro direction wi, for the opposition peak. Ring b holds the directions whose c
 to ``retro_max_deg``: rings of nearly equal width in gamma, found with one square root. Their
 f is the cos(theta_o)-weighted mean of the BRDF over the part of the ring above the horizon,
 like a cell's.
+
+Points (optional, ``[sensor] directions_deg`` and ``retro_points_deg``): exact directions at
+which next-event estimation (:mod:`microsim.estimators.points`) reads f, not cells. A direction
+is (theta_o, phi_o) with phi_o the relative azimuth (conventions §1): phi_i + phi_o in the
+scene's frame. A retro point at phase angle gamma is the retro direction wi turned by gamma
+towards the normal, in the plane of incidence: theta_o = theta_i - gamma on the side of the
+light, and past the normal (on the specular side) where gamma > theta_i. The sensor holds them
+as given (``point_spec``) and, once turned :meth:`toward` an incidence, as unit vectors
+(``points``) that the kernels read.
 """
 
 from __future__ import annotations
@@ -34,6 +43,13 @@ import numba
 import numpy as np
 
 from .frames import direction
+
+
+#: most points (directions and retro points together) a run reads f at: each costs a shadow ray
+#: per scattering event
+MAX_POINTS = 256
+#: kinds of point (``Sensor.point_spec``): a direction (theta_o, relative phi_o), a retro point (gamma)
+DIRECTION_POINT, RETRO_POINT = 0.0, 1.0
 
 
 class Sensor(NamedTuple):
@@ -50,6 +66,11 @@ class Sensor(NamedTuple):
     edge_y: np.ndarray  # (N,) its sin
     #: retro rings: (wi_x, wi_y, wi_z, chord step, ring count); no rings by default (see the module doc)
     retro: np.ndarray = np.array([0.0, 0.0, 1.0, 1.0, 0.0])
+    #: points (see the module doc), one row each: (DIRECTION_POINT, theta_o, phi_o) or
+    #: (RETRO_POINT, gamma, 0), radians; none by default
+    point_spec: np.ndarray = np.zeros((0, 3))
+    #: the points' unit vectors about the incidence of :meth:`toward` (before it: about the zenith)
+    points: np.ndarray = np.zeros((0, 3))
 
     @classmethod
     def from_ring_counts(cls, ring_counts) -> "Sensor":
@@ -86,9 +107,51 @@ class Sensor(NamedTuple):
         step = 2.0 * math.sin(math.radians(max_deg) / 2.0) / max(rings, 1)
         return self._replace(retro=np.array([0.0, 0.0, 1.0, step, float(rings)]))
 
-    def toward(self, wi: np.ndarray) -> "Sensor":
-        """This sensor with its retro rings centred on the incidence direction wi."""
-        return self._replace(retro=np.array([wi[0], wi[1], wi[2], self.retro[3], self.retro[4]]))
+    def with_points(self, directions_deg=(), retro_points_deg=()) -> "Sensor":
+        """This sensor with the points (module doc) ``directions_deg`` ([theta_o, phi_o] pairs) and
+        ``retro_points_deg`` (phase angles gamma), in that order, degrees."""
+        spec = [(DIRECTION_POINT, math.radians(t), math.radians(p)) for t, p in directions_deg]
+        spec += [(RETRO_POINT, math.radians(g), 0.0) for g in retro_points_deg]
+        spec = np.array(spec, np.float64).reshape(-1, 3)
+        return self._replace(point_spec=spec, points=self.point_directions(np.array([0.0, 0.0, 1.0]), 0.0, spec))
+
+    def toward(self, wi: np.ndarray, phi_i: float | None = None) -> "Sensor":
+        """This sensor with its retro rings centred on the incidence direction wi and its points
+        turned about it; ``phi_i``, the incidence's azimuth, defines the plane of incidence where
+        wi is the normal (else it is wi's own)."""
+        return self._replace(retro=np.array([wi[0], wi[1], wi[2], self.retro[3], self.retro[4]]),
+                             points=self.point_directions(wi, phi_i))
+
+    @property
+    def n_points(self) -> int:
+        return len(self.point_spec)
+
+    def point_directions(self, wi: np.ndarray, phi_i: float | None = None, spec=None) -> np.ndarray:
+        """Unit vectors (n_points, 3) of the points about the incidence wi (module doc); ``phi_i``
+        as :meth:`toward` takes it."""
+        spec = self.point_spec if spec is None else spec
+        wi = np.asarray(wi, np.float64)
+        theta_i = math.acos(min(max(float(wi[2]), -1.0), 1.0))
+        if phi_i is None:
+            phi_i = math.atan2(wi[1], wi[0]) if wi[0] or wi[1] else 0.0
+        theta, phi = spec[:, 1].copy(), phi_i + spec[:, 2]
+        retro = spec[:, 0] == RETRO_POINT
+        turned = theta_i - spec[retro, 1]  # negative: past the normal, on the specular side
+        theta[retro], phi[retro] = np.abs(turned), np.where(turned >= 0.0, phi_i, phi_i + math.pi)
+        return direction(theta, phi).reshape(-1, 3)
+
+    def point_angles(self, wi: np.ndarray, phi_i: float | None = None):
+        """(theta_o, relative phi_o in [0, 2 pi), phase angle gamma from wi) of every point about
+        the incidence wi, radians."""
+        w = self.point_directions(wi, phi_i)
+        wi = np.asarray(wi, np.float64)
+        if phi_i is None:
+            phi_i = math.atan2(wi[1], wi[0]) if wi[0] or wi[1] else 0.0
+        relative = np.remainder(np.arctan2(w[:, 1], w[:, 0]) - phi_i, 2.0 * math.pi)
+        relative[relative > 2.0 * math.pi - 1e-12] = 0.0  # -0 by rounding
+        relative[(w[:, 0] == 0.0) & (w[:, 1] == 0.0)] = 0.0
+        gamma = 2.0 * np.arcsin(np.clip(np.linalg.norm(w - wi, axis=1) / 2.0, 0.0, 1.0))
+        return np.arccos(np.clip(w[:, 2], -1.0, 1.0)), relative, gamma
 
     @property
     def retro_rings(self) -> int:

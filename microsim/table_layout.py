@@ -50,6 +50,7 @@ AXIS_LENGTHS = {
     "cells": "n_c, the sensor's cells (about sensor.cells)",
     "orders": "4: scattering orders 1, 2, 3 and 4 or more",
     "retro_rings": "n_r = sensor.retro_rings",
+    "points": "n_d, the points of sensor.directions_deg then sensor.retro_points_deg",
     "xyz": "3: the components of a unit vector",
 }
 

@@ -115,6 +115,7 @@ def write(path: str | Path, result, config, overwrite: bool = False) -> Path:
             h5["sensor"].attrs["cells_requested"] = plan.sensor_cells
             for estimator in result.estimators:
                 estimator.write(lambda name, data: _store(h5, name, data), result.estimates)
+                h5.attrs.update(estimator.attributes())
             for j, name in enumerate((*ENERGY_NAMES, "balance")):
                 _store(h5, f"energy/{name}", np.array([e.mean[j] for e in result.energy]))
                 _store(h5, f"energy/{name}_stderr", np.array([e.stderr[j] for e in result.energy]))
@@ -217,6 +218,8 @@ DATASETS = table_layout.CORE + estimators.datasets()
 AXES = {d.name: d.axes for d in DATASETS if d.axes is not None}
 #: datasets every table has: brdf_order1_base only where there is a base, so it is checked when present
 REQUIRED = tuple(d.name for d in DATASETS if d.required)
+#: every attribute a table may hold: the core ones, then each estimator's
+ATTRIBUTES = table_layout.ATTRIBUTES + estimators.attributes()
 
 
 def load(path: str | Path) -> Table:
@@ -289,7 +292,9 @@ def _check(arrays: dict) -> None:
     if theta.ndim != 1:
         raise TableError(f"incidence/theta has shape {theta.shape}, expected (incidences,)")
     rings = arrays["sensor/retro_gamma_lo"].size if "sensor/retro_gamma_lo" in arrays else 0
-    sizes = {"incidences": theta.size, "cells": int(counts.sum()), "orders": ORDERS, "xyz": 3, "retro_rings": rings}
+    points = arrays["sensor/points_kind"].size if "sensor/points_kind" in arrays else 0
+    sizes = {"incidences": theta.size, "cells": int(counts.sum()), "orders": ORDERS, "xyz": 3, "retro_rings": rings,
+             "points": points}
     for name, axes in AXES.items():
         expected = tuple(sizes[axis] for axis in axes)
         if name in arrays and arrays[name].shape != expected:

@@ -43,7 +43,7 @@ def test_every_cli_option_config_key_model_and_dataset_is_in_the_docs(site_text)
     missing += [key.name for key in config.keys() + sweep.keys() if key.name not in site_text]
     missing += [name for name in models.available() if name not in words]
     missing += [d.name for d in tables.DATASETS if d.name not in words]
-    missing += [a.name for a in table_layout.ATTRIBUTES if a.name not in words]
+    missing += [a.name for a in tables.ATTRIBUTES if a.name not in words]
     assert missing == []
 
 

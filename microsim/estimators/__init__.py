@@ -15,8 +15,9 @@ An estimator is one module with one :class:`Estimator` subclass and one line in
 - the datasets it writes (:meth:`Estimator.write`), from those estimates.
 
 The reducer (:mod:`microsim.runner`), the unit store and the table writer read the estimators'
-outputs by name and know none of them. The first estimator is :mod:`.exit_bins`, the binning of
-exits on the sensor's cells.
+outputs by name and know none of them. The estimators: :mod:`.exit_bins`, the binning of exits
+on the sensor's cells (every run), and :mod:`.points`, next-event estimation at the sensor's
+exact directions (runs that ask for points).
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from ..tally import albedo_axis
 
 #: estimator name -> "module:class", imported on use; a run uses every estimator whose
 #: :meth:`Estimator.wanted` says so, in this order
-ESTIMATORS = {"exit_bins": "microsim.estimators.exit_bins:ExitBins"}
+ESTIMATORS = {"exit_bins": "microsim.estimators.exit_bins:ExitBins", "points": "microsim.estimators.points:Points"}
 #: the estimators of a tracer used without a run (tests, benchmarks)
 DEFAULT = ("exit_bins",)
 
@@ -45,6 +46,8 @@ class Estimator:
     Record: ClassVar[type]
     #: the datasets it writes (microsim.table_layout.Dataset): the table's declared layout
     DATASETS: ClassVar[tuple] = ()
+    #: the attributes of the table's root it writes (microsim.table_layout.Attribute)
+    ATTRIBUTES: ClassVar[tuple] = ()
 
     def __init__(self, sensor, plan=None):
         self.sensor, self.plan = sensor, plan
@@ -86,6 +89,10 @@ class Estimator:
         :meth:`reduce` to its per-incidence :class:`microsim.runner.Estimate` list."""
         raise NotImplementedError
 
+    def attributes(self) -> dict:
+        """The attributes of the table's root it writes (those of ``ATTRIBUTES``), by name."""
+        return {}
+
 
 def get(name: str) -> type[Estimator]:
     """The estimator class registered as ``name``."""
@@ -96,6 +103,11 @@ def get(name: str) -> type[Estimator]:
 def datasets() -> tuple:
     """The datasets every registered estimator may write (``Estimator.DATASETS``), in order."""
     return tuple(dataset for name in ESTIMATORS for dataset in get(name).DATASETS)
+
+
+def attributes() -> tuple:
+    """The root attributes every registered estimator may write (``Estimator.ATTRIBUTES``), in order."""
+    return tuple(attribute for name in ESTIMATORS for attribute in get(name).ATTRIBUTES)
 
 
 def names_for(config) -> tuple[str, ...]:

@@ -16,19 +16,19 @@ def on_exit(record, tally, paths, i, d, sensor):
     ``record`` (row ``tally.row``; albedo scales ``tally.albedo_scale``)."""
 
 
-def on_interaction(record, tally, work, i, world, site):
+def on_interaction(record, tally, work, i, world, site, sensor):
     """The path of row i of ``work`` (its ``paths``, and its Embree query record where it has
     one) is about to interact, with its weight and order before the interaction: ``site`` =
     (d, state), the direction it arrived along and its integrator's state at the event;
-    ``world`` is what its integrator traces, which the visibility query takes
-    (:mod:`microsim.integrators.walk`)."""
+    ``world`` is what its integrator traces, which the queries of next-event estimation take
+    (:mod:`microsim.integrators.walk`); ``sensor`` as the exit's."""
 
 
 def _nothing(record, tally, paths, i, d, sensor):
     pass
 
 
-def _nothing_on_interaction(record, tally, work, i, world, site):
+def _nothing_on_interaction(record, tally, work, i, world, site, sensor):
     pass
 
 
@@ -40,7 +40,7 @@ def each_exit(records, tally, paths, i, d, sensor):
     """:func:`on_exit` of every record of the tuple ``records``."""
 
 
-def each_interaction(records, tally, work, i, world, site):
+def each_interaction(records, tally, work, i, world, site, sensor):
     """:func:`on_interaction` of every record of the tuple ``records``."""
 
 

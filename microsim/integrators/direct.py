@@ -21,8 +21,9 @@ from .. import embree
 from ..tally import SEGMENTS
 from .scheduler import CHUNK_PATHS, SLOTS, chunk_tally, trace_in_waves, wave_rows, workspace
 from .events import MAX_IDLE_SEGMENTS
-from .surface_transport import TOP, clearance, follow, prepare_segment, start_path, wrap_point, wrap_side
-from .walk import VISIBILITY
+from .surface_transport import TOP, clearance, evaluate_on_shape, follow, prepare_segment, start_path, wrap_point, \
+    wrap_side
+from .walk import EVALUATE, VISIBILITY
 
 class DirectWorld(NamedTuple):
     """What the direct backend's kernels trace: the scene's arrays, and its committed Embree scene."""
@@ -141,6 +142,9 @@ def query(handle, work, j):
                 work.log[k, 3 + axis] = rays.direction[j, axis]
             work.log[k, 6] = rays.tfar[j]
     embree.trace(handle.handle, work.queries, j)
+
+
+EVALUATE.register(DirectWorld)(evaluate_on_shape)
 
 
 @VISIBILITY.register(DirectWorld)

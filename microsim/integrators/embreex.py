@@ -23,7 +23,8 @@ import numpy as np
 from ..tally import SEGMENTS, empty_tally
 from .events import move_path
 from .records import allocate_paths, allocate_rays
-from .surface_transport import follow, prepare_segment, start_path
+from .surface_transport import evaluate_on_shape, follow, prepare_segment, start_path
+from .walk import EVALUATE
 
 #: paths traced at once; their tallies are added batch after batch
 BATCH_PATHS = 1 << 20
@@ -34,6 +35,9 @@ class EmbreexWorld(NamedTuple):
     from Python: no handle, and no visibility query)."""
 
     scene: object
+
+
+EVALUATE.register(EmbreexWorld)(evaluate_on_shape)
 
 
 class Lanes(NamedTuple):

@@ -18,7 +18,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from ..physics.phase import sample_cosine
+from ..physics.phase import phase_value, sample_cosine
 from ..physics.rng import uniform
 from ..physics.sampling import from_local
 from ..estimators import DEFAULT, build
@@ -26,7 +26,7 @@ from ..tally import SEGMENTS, SINGLE_ALBEDO
 from .events import begin_path
 from .records import Beam
 from .scheduler import trace_in_waves, wave_rows, workspace
-from .walk import EXIT, INTERACTION, VISIBILITY, trace_chunks
+from .walk import EVALUATE, EXIT, INTERACTION, VISIBILITY, trace_chunks
 
 class Medium(NamedTuple):
     """What the medium kernels trace (their world, :mod:`.walk`): the phase function (its code in
@@ -48,11 +48,11 @@ class MediumTracer:
         self.scene, self.sensor, self.threads = scene, sensor, threads
         self.estimators = build(DEFAULT, sensor) if estimators is None else estimators
 
-    def trace(self, wi, n_paths: int, key, max_order: int, albedo_scale=SINGLE_ALBEDO):
+    def trace(self, wi, n_paths: int, key, max_order: int, albedo_scale=SINGLE_ALBEDO, phi_i=None):
         """Trace ``n_paths`` paths arriving along -``wi`` on the random stream ``key``; see
         :meth:`microsim.integrators.surface.SurfaceTracer.trace`."""
         beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order, np.asarray(albedo_scale, np.float64))
-        medium, sensor = self.scene.medium, self.sensor.toward(beam.wi)
+        medium, sensor = self.scene.medium, self.sensor.toward(beam.wi, phi_i)
         work = workspace(wave_rows(n_paths, self.threads), self.estimators, albedos=len(beam.albedo_scale))
         return trace_in_waves(beam, self.estimators, self.threads, work,
                               lambda *share: trace_medium_chunks(*share, beam, medium, sensor, work))
@@ -105,6 +105,12 @@ def transmittance(world, work, i, state, wo):
     """exp(-tau) from depth ``state`` = z (<= 0, in mean free paths) to the surface along wo: the
     optical path -z / wo_z; 0 for wo going down or level."""
     return math.exp(state / wo[2]) if wo[2] > 0.0 else 0.0
+
+
+@EVALUATE.register(Medium)
+def scattered(world, state, wi, wo):
+    """c p(-wi . wo): the point scatterer turns the light by the angle between d = -wi and wo."""
+    return world.albedo * phase_value(world.phase, -(wi[0] * wo[0] + wi[1] * wo[1] + wi[2] * wo[2]))
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

@@ -44,16 +44,18 @@ class SurfaceTracer:
         estimators = build(DEFAULT, sensor) if estimators is None else estimators
         self.backend = backend_module(backend).backend(scene, threads, estimators)
 
-    def trace(self, wi, n_paths: int, key, max_order: int, albedo_scale=SINGLE_ALBEDO):
+    def trace(self, wi, n_paths: int, key, max_order: int, albedo_scale=SINGLE_ALBEDO, phi_i=None):
         """Trace ``n_paths`` paths arriving along -``wi``; return their :class:`~microsim.tally.Tally`.
 
         ``key`` selects the random stream (see :mod:`microsim.physics.rng`); ``max_order`` = 0 means
         unlimited, k > 0 truncates a path at its (k+1)-th interaction; ``albedo_scale`` holds
-        c_j / c_max for a run of several albedos (:class:`~microsim.tally.Tally`).
+        c_j / c_max for a run of several albedos (:class:`~microsim.tally.Tally`); ``phi_i``, the
+        incidence's azimuth, turns the sensor's points where wi is the normal
+        (:meth:`microsim.sensor.Sensor.toward`).
         """
         beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order,
                     np.asarray(albedo_scale, np.float64))
-        return self.backend.trace(beam, self.arrays, self.sensor.toward(beam.wi))
+        return self.backend.trace(beam, self.arrays, self.sensor.toward(beam.wi, phi_i))
 
     @classmethod
     def compile(cls, sensor, estimators=None, albedos: int = 1, scene=None, backend: str = "direct",

@@ -40,7 +40,7 @@ import math
 import numba
 import numpy as np
 
-from ..materials import scatter
+from ..materials import evaluate, scatter
 from ..physics.rng import uniform
 from ..shapes import surface_point
 from ..tally import INSIDE_HITS
@@ -118,6 +118,15 @@ def interact_on_shape(world, paths, i, path):
         paths.from_base[i] = m == scene.base_material
     paths.idle[i] = 0
     return wo, factor, cut, (wrap_point(p, n, clearance(p, scene.shape_size[s]), scene.tile), n, s)
+
+
+def evaluate_on_shape(world, state, wi, wo):
+    """The material of the shape met, at the shape's normal there (``state`` = (point, normal,
+    shape)): what both backends register as their worlds' :data:`~.walk.EVALUATE`."""
+    p, n, s = state
+    scene = world.scene
+    m = scene.shape_material[s]
+    return evaluate(scene.material_code[m], scene.material_params[m], wi, wo, n)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

@@ -39,14 +39,14 @@ import numpy as np
 
 from .. import embree
 from ..estimators import DEFAULT, build
-from ..materials import scatter
+from ..materials import evaluate, scatter
 from ..physics.distributions import sample_slope
 from ..physics.rng import uniform
 from ..tally import SEGMENTS, SINGLE_ALBEDO
 from .events import begin_path
 from .records import Beam
 from .scheduler import trace_in_waves, wave_rows, workspace
-from .walk import EXIT, INTERACTION, STOP, VISIBILITY, trace_chunks
+from .walk import EVALUATE, EXIT, INTERACTION, STOP, VISIBILITY, trace_chunks
 
 #: the canonical groove the Embree intersector traces: half-width 1 in x, depth 1, y in [-1, 1]
 #: (a ray's axial motion is dropped, so it never leaves y = 0); left facet (normal +x side) first
@@ -107,11 +107,11 @@ class VCavityTracer:
         self.embree = embree.Scene(CANONICAL_VERTICES, CANONICAL_FACES) if scene.intersector == "embree" else None
         self.ray_log = np.zeros((0, 7), np.float32)
 
-    def trace(self, wi, n_paths: int, key, max_order: int, albedo_scale=SINGLE_ALBEDO):
+    def trace(self, wi, n_paths: int, key, max_order: int, albedo_scale=SINGLE_ALBEDO, phi_i=None):
         """Trace ``n_paths`` paths arriving along -``wi`` on the random stream ``key``; see
         :meth:`microsim.integrators.surface.SurfaceTracer.trace`."""
         beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order, np.asarray(albedo_scale, np.float64))
-        grooves, sensor = self.scene.grooves, self.sensor.toward(beam.wi)
+        grooves, sensor = self.scene.grooves, self.sensor.toward(beam.wi, phi_i)
         work = workspace(wave_rows(n_paths, self.threads), self.estimators, self.log_rays, len(beam.albedo_scale))
         world = GrooveWorld(grooves) if self.embree is None else EmbreeGrooveWorld(grooves, self.embree.arrays())
         trace_share = trace_chunks_analytic if self.embree is None else trace_chunks_embree
@@ -221,6 +221,14 @@ def interact_on_facet(world, paths, i, path):
     grooves = world.grooves
     wo, factor, cut = scatter(grooves.material_code, grooves.material_params, paths.rng, i, d, state[2])
     return wo, factor, cut, state
+
+
+@EVALUATE.register(GrooveWorld)
+@EVALUATE.register(EmbreeGrooveWorld)
+def evaluate_on_facet(world, state, wi, wo):
+    """The facets' material at the facet's normal (the state's third item)."""
+    grooves = world.grooves
+    return evaluate(grooves.material_code, grooves.material_params, wi, wo, state[2])
 
 
 @VISIBILITY.register(GrooveWorld)

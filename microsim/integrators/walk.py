@@ -16,15 +16,18 @@ tuple of one type).
   direction, the weight factor kept and the fraction cut (as :func:`microsim.materials.scatter`
   returns them), and the state the path leaves with (off the surface, ...);
 
-and, registered on its world's class (:data:`VISIBILITY`), the visibility query
-``visibility(world, work, i, state, wo)``: the transmittance from the point of an interaction
-(the path's state there) along wo to above the surface (Embree's occluded query through the
-periodic tile, the analytic groove, exp(-tau) in the medium), what next-event estimation weighs
-a point estimate by. An estimator's ``on_interaction`` hook gets the world and the workspace
-(row i's query record is free during the event) and calls it; it is called rarely, so it is
-dispatched by the world's type (:mod:`microsim.dispatch`). The embreex backend, which queries
-Embree a segment of every path at a time, has none. The Embree intersector of the V-cavities
-logs its visibility queries with its others when a ray log is kept.
+and, registered on its world's class, the two queries of next-event estimation
+(:mod:`microsim.estimators.points`): :data:`EVALUATE`, ``evaluate(world, state, wi, wo)``, what
+the interaction at ``state`` sends from wi into wo per steradian, f(wi, wo) |n . wo| without the
+delta lobes (a surface's material, :func:`microsim.materials.evaluate`; c p for a point
+scatterer of the medium); and :data:`VISIBILITY`, ``visibility(world, work, i, state, wo)``: the
+transmittance from the point of an interaction along wo to above the surface (Embree's occluded
+query through the periodic tile, the analytic groove, exp(-tau) in the medium). An estimator's
+``on_interaction`` hook gets the world and the workspace (row i's query record is free during
+the event) and calls them; they are dispatched by the world's type (:mod:`microsim.dispatch`).
+The embreex backend, which queries Embree a segment of every path at a time, has no visibility
+query. The Embree intersector of the V-cavities logs its visibility queries with its others
+when a ray log is kept.
 
 :func:`take_event` then does, once for every integrator, what an event means: an exit goes to
 every estimator (:func:`microsim.estimators.hooks.each_exit`); transmission and truncation are
@@ -73,6 +76,15 @@ def visibility(world, work, i, state, wo):
 VISIBILITY = Generic(visibility)
 
 
+def evaluate(world, state, wi, wo):
+    """f(wi, wo) |n . wo| of the interaction at ``state`` without its delta lobes, per steradian
+    of wo (wi = -d, towards where the light came from; both unit); c p(-wi . wo) for a point
+    scatterer of albedo c and phase function p."""
+
+
+EVALUATE = Generic(evaluate)
+
+
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def take_event(world, work, i, event, max_order, sensor, tally, interact):
     """Row i of ``work`` met ``event`` = (kind, d, state): take it through it (module doc);
@@ -93,7 +105,7 @@ def take_event(world, work, i, event, max_order, sensor, tally, interact):
         return not idled(paths, i, tally), d, state
     if cut_at_max_order(paths, i, max_order, tally):
         return False, d, state
-    each_interaction(tally.estimates, tally, work, i, world, (d, state))
+    each_interaction(tally.estimates, tally, work, i, world, (d, state), sensor)
     wo, factor, cut, leaving = interact(world, paths, i, (d, state))
     return interacted(paths, i, factor, cut, tally), wo, leaving
 

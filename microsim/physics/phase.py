@@ -90,3 +90,11 @@ def sample_cosine(code, states, i):
     if code == LAMBERT_SPHERE:
         return sample_phase_exact(uniform(states, i), uniform(states, i), uniform(states, i))
     return 1.0 - 2.0 * uniform(states, i)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def phase_value(code, mu):
+    """p(mu) in 1/sr of the phase function of kernel code ``code`` (:data:`PHASES`)."""
+    if code == LAMBERT_SPHERE:
+        return phase_lambert_sphere(mu)
+    return 0.25 / math.pi
