@@ -73,10 +73,6 @@ class Plan:
                 raise PlanError(f"--threads {threads}: the embreex backend traces on one thread; use --workers")
             threads, notes = 1, notes + ["one thread (the embreex backend has no threads)"]
         generator = geometry.SCENES[config.scene.kind]
-        if config.sensor.n_points and backend == "embreex" and generator.INTEGRATOR == "surface":
-            key = "sensor.directions_deg" if config.sensor.directions_deg else "sensor.retro_points_deg"
-            raise PlanError(f"{key}: next-event estimation on {config.scene.kind} needs the direct backend (the "
-                            f"embreex backend has no visibility query){'; ' + notes[0] if notes else ''}")
         config, substitution = generator.for_backend(config, backend)
         notes += [substitution] if substitution else []
         return cls(config, generator.resolve(config), theta, phi, config.sensor.cells, run.realizations,
@@ -295,7 +291,9 @@ def memory_estimate(plan: Plan, sensor: Sensor, workers: int, spawned: bool = Fa
     estimators, albedos = plan.build_estimators(sensor), max(1, len(plan.albedos))
     tally = 8 * albedos * sum(estimator.tally_values() for estimator in estimators)
     if plan.backend == "embreex":
-        paths = min(plan.paths_per_realization, embreex.BATCH_PATHS) * PATH_ROW_BYTES
+        points = sensor.n_points
+        rows = min(plan.paths_per_realization, embreex.BATCH_PATHS // max(points, 1))
+        paths = rows * (PATH_ROW_BYTES + points * embreex.SHADOW_BYTES)
     else:
         paths = scheduler.WAVE_CHUNKS_PER_THREAD * plan.threads * (tally + 1024)
     tracing = plan.generator.scene_bytes(plan.scene) + paths + 2 * tally

@@ -248,3 +248,67 @@ def test_points_are_reciprocal_at_exact_directions(scene, tmp_path):
                                                                                  stderr[b, point_of[b, a]])
          for a in range(len(incidences)) for b in range(a + 1, len(incidences))]
     assert len(z) == 28 and max(z) < 4.5, f"{scene}: worst reciprocity z {max(z):.2f}"
+
+
+# ------------------------------------------------------------------- backends and bad input
+
+
+def test_the_embreex_backend_sees_what_the_direct_one_sees(tmp_path):
+    """The embreex backend queues its shadow rays and traces them after each pass (wrapping at
+    the tile's sides); the direct one asks Embree at the event: the same paths give the same
+    point estimates, to the rounding of the order in which they are added. The points are
+    grazing enough that shadow rays cross the small tile's sides."""
+    cfg = {"scene": {"kind": "poisson_spheres", "volume_fraction": 0.3, "subdivisions": 1, "tile": 6.0, "depth": 8.0},
+           "material": {"kind": "lambert", "albedo": 0.8}, "illumination": {"theta_i_deg": [20.0, 70.0]},
+           "sensor": {"cells": 20, "directions_deg": [[0, 0], [50, 90], [80, 180], [88, 30]],
+                      "retro_points_deg": [0.0, 4.0]},
+           "run": {"paths": 20_000, "realizations": 2}}
+    points = {}
+    for backend in ("direct", "embreex"):
+        table = tables.load(session.run(cfg, tmp_path / f"{backend}.h5", backend=backend).tables[0])
+        points[backend] = table.arrays["brdf_points_order"]
+    assert points["direct"][:, :2].min() > 0
+    np.testing.assert_allclose(points["embreex"], points["direct"], rtol=1e-9, atol=1e-15)
+
+
+@pytest.mark.parametrize("sensor, key", [
+    ("directions_deg = [[90.0, 0.0]]", "sensor.directions_deg[0]"),
+    ("directions_deg = [[30.0, 0.0], [-1.0, 0.0]]", "sensor.directions_deg[1]"),
+    ("directions_deg = [[30.0]]", "sensor.directions_deg[0]"),
+    ("directions_deg = [30.0, 0.0]", "sensor.directions_deg[0]"),
+    ("directions_deg = [[30.0, 400.0]]", "sensor.directions_deg[0]"),
+    ("retro_points_deg = [0.0, 90.0]", "sensor.retro_points_deg[1]"),
+    ("retro_points_deg = 2.0", "sensor.retro_points_deg"),
+    ("directions_deg = [" + ", ".join(["[10.0, 0.0]"] * 200) + "]\nretro_points_deg = [1.0] * 57".replace(
+        "[1.0] * 57", "[" + ", ".join(["1.0"] * 57) + "]"), "256"),
+])
+def test_bad_points_are_refused_in_one_line(sensor, key, tmp_path, capsys):
+    from refusals import SMALL_RUN, assert_run_refused
+
+    assert_run_refused("[scene]\nkind = \"plane\"\n" + SMALL_RUN.replace("cells = 100", "cells = 100\n" + sensor),
+                       key, tmp_path, capsys)
+
+
+@pytest.mark.parametrize("materials", [
+    '[material]\nkind = "mirror"\n',
+    '[material]\nkind = "conductor"\neta = 0.2\nk = 3.0\n',
+])
+def test_points_on_a_scene_of_delta_lobes_only_are_refused(materials, tmp_path, capsys):
+    from refusals import SMALL_RUN, assert_run_refused
+
+    rest = SMALL_RUN.replace('[material]\nkind = "lambert"\nalbedo = 0.8\n', materials)
+    assert_run_refused('[scene]\nkind = "vcavities"\nroughness = 0.5\n' + rest.replace(
+        "cells = 100", "cells = 100\nretro_points_deg = [0.0]"), "sensor.retro_points_deg", tmp_path, capsys)
+
+
+def test_the_table_names_the_delta_lobes_it_leaves_out(tmp_path):
+    """Mirror spheres on a Lambertian base: the points see the base (and not the mirrors'
+    reflections), and the table says so."""
+    cfg = {"scene": {"kind": "micrograins", "tau0": 0.5, "beta": 1.0}, "material": {"kind": "mirror"},
+           "base": {"kind": "interfaced_lambert", "albedo": 0.6, "eta": 1.5},
+           "illumination": {"theta_i_deg": [30.0]}, "sensor": {"cells": 20, "directions_deg": [[10.0, 0.0]]},
+           "run": {"paths": 2_000, "realizations": 2}}
+    table = tables.load(session.run(cfg, tmp_path / "delta.h5").tables[0])
+    assert table.attrs["points_delta_lobes"] == ("material (mirror): its mirror reflection; base (interfaced_lambert): "
+                                                 "the mirror reflection of its smooth interface")
+    assert table.arrays["brdf_points"][0, 0] > 0

@@ -2,8 +2,9 @@
 
 Each estimator registers its implementations on its ``Record`` class (:class:`microsim.dispatch.Generic`);
 a hook it does not register does nothing and compiles to nothing. The walk calls
-:func:`each_exit` and :func:`each_interaction` on the tuple of the run's records; they call the
-hook of each record in turn (unrolled when the kernel compiles).
+:func:`each_exit` and :func:`each_interaction` on the tuple of the run's records, and a backend
+that answers visibility later (:mod:`microsim.integrators.embreex`) :func:`each_seen`; they call
+the hook of each record in turn (unrolled when the kernel compiles).
 """
 
 from __future__ import annotations
@@ -24,6 +25,11 @@ def on_interaction(record, tally, work, i, world, site, sensor):
     (:mod:`microsim.integrators.walk`); ``sensor`` as the exit's."""
 
 
+def on_seen(record, tally, payload):
+    """A shadow ray that the estimator queued with ``payload`` (through
+    :func:`microsim.integrators.walk.see`) reached above the surface unoccluded."""
+
+
 def _nothing(record, tally, paths, i, d, sensor):
     pass
 
@@ -32,8 +38,13 @@ def _nothing_on_interaction(record, tally, work, i, world, site, sensor):
     pass
 
 
+def _nothing_on_seen(record, tally, payload):
+    pass
+
+
 ON_EXIT = Generic(on_exit, default=_nothing)
 ON_INTERACTION = Generic(on_interaction, default=_nothing_on_interaction)
+ON_SEEN = Generic(on_seen, default=_nothing_on_seen)
 
 
 def each_exit(records, tally, paths, i, d, sensor):
@@ -44,5 +55,10 @@ def each_interaction(records, tally, work, i, world, site, sensor):
     """:func:`on_interaction` of every record of the tuple ``records``."""
 
 
+def each_seen(records, tally, payload):
+    """:func:`on_seen` of every record of the tuple ``records``."""
+
+
 over_each(each_exit, on_exit)
 over_each(each_interaction, on_interaction)
+over_each(each_seen, on_seen)

@@ -35,7 +35,7 @@ from ..orders import ORDERS
 from ..table_layout import Attribute, Dataset
 from . import Estimator
 from .exit_bins import add_exit
-from .hooks import ON_INTERACTION
+from .hooks import ON_INTERACTION, ON_SEEN
 
 
 class PointsTally(NamedTuple):
@@ -139,6 +139,13 @@ def on_interaction(record, tally, work, i, world, site, sensor):
         wo = (points[k, 0], points[k, 1], points[k, 2])
         value = walk.evaluate(world, state, wi, wo)
         if value > 0.0:
-            seen = walk.visibility(world, work, i, state, wo)
+            seen = walk.see(world, work, i, state, wo, (w * value, k, order))
             if seen > 0.0:
                 add_exit(weight, tally.albedo_scale, (row, k), w * value * seen, order)
+
+
+@ON_SEEN.register(PointsTally)
+def on_seen(record, tally, payload):
+    """A queued shadow ray towards point k reached the sky: its w e into the row of its order."""
+    amount, k, order = payload
+    add_exit(record.weight[tally.row], tally.albedo_scale, (min(order, ORDERS) - 1, k), amount, order)

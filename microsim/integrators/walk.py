@@ -22,12 +22,14 @@ the interaction at ``state`` sends from wi into wo per steradian, f(wi, wo) |n .
 delta lobes (a surface's material, :func:`microsim.materials.evaluate`; c p for a point
 scatterer of the medium); and :data:`VISIBILITY`, ``visibility(world, work, i, state, wo)``: the
 transmittance from the point of an interaction along wo to above the surface (Embree's occluded
-query through the periodic tile, the analytic groove, exp(-tau) in the medium). An estimator's
-``on_interaction`` hook gets the world and the workspace (row i's query record is free during
-the event) and calls them; they are dispatched by the world's type (:mod:`microsim.dispatch`).
-The embreex backend, which queries Embree a segment of every path at a time, has no visibility
-query. The Embree intersector of the V-cavities logs its visibility queries with its others
-when a ray log is kept.
+query through the periodic tile, the analytic groove, exp(-tau) in the medium), which
+estimators ask through :data:`SEE`, ``see(world, work, i, state, wo, payload)``: the embreex
+backend, which queries Embree a segment of every path at a time from Python, cannot answer at
+once; it queues the shadow ray and hands ``payload`` back to the estimators when the ray is seen
+(:mod:`.embreex`). An estimator's ``on_interaction`` hook gets the world and the workspace (row
+i's query record is free during the event) and calls them; they are dispatched by the world's
+type (:mod:`microsim.dispatch`). The Embree intersector of the V-cavities logs its visibility
+queries with its others when a ray log is kept.
 
 :func:`take_event` then does, once for every integrator, what an event means: an exit goes to
 every estimator (:func:`microsim.estimators.hooks.each_exit`); transmission and truncation are
@@ -74,6 +76,20 @@ def visibility(world, work, i, state, wo):
 
 
 VISIBILITY = Generic(visibility)
+
+
+def see(world, work, i, state, wo, payload):
+    """:func:`visibility` now, for a world that answers it at once (the default); a world that
+    cannot (the embreex backend, which calls Embree from Python) queues the shadow ray with
+    ``payload`` and returns 0, and hands the payload to every estimator
+    (:func:`microsim.estimators.hooks.each_seen`) once the ray has reached above the surface."""
+
+
+def _see_now(world, work, i, state, wo, payload):
+    return visibility(world, work, i, state, wo)
+
+
+SEE = Generic(see, default=_see_now)
 
 
 def evaluate(world, state, wi, wo):
