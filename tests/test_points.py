@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from microsim import config, executors, models, runner, session, tables
+from microsim import config, models, runner, session, tables
 from microsim.orders import ORDERS
 from microsim.physics.phase import phase_lambert_sphere
 
@@ -32,23 +32,8 @@ ALPHA = 1e-3
 
 
 def per_realization(cfg: dict):
-    """Trace ``cfg`` unit by unit: (plan, {estimate name: (R, n_i, ...) array of every
-    realization's estimate}), as the reducer sees them (microsim.runner)."""
-    plan = runner.Plan.from_config(config.validate(cfg))
-    sensor = plan.build_sensor()
-    estimators = plan.build_estimators(sensor)
-    runner.compile_tracer(plan, sensor)
-    out = {}
-
-    def emit(unit, tally, info):
-        r, i = unit
-        for estimator, record in zip(estimators, tally.estimates):
-            fields = record._make(field[0] for field in record)
-            for name, value in estimator.reduce(fields, tally.paths, i).items():
-                out.setdefault(name, np.zeros((plan.realizations, plan.n_incidences, *value.shape)))[r, i] = value
-
-    executors.trace_units(plan, plan.units, emit)
-    return plan, out
+    """(plan, every realization's estimates by name) of the config dict ``cfg``."""
+    return runner.trace_realizations(config.validate(cfg))
 
 
 def hotelling(deviations: np.ndarray) -> tuple[float, float, float]:
