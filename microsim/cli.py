@@ -36,6 +36,18 @@ class BadInput(click.ClickException):
     exit_code = EXIT_BAD_INPUT
 
 
+def on_points_or_rings(command):
+    """The --points and --retro flags of compare and fit (what they compare or fit instead of the cells)."""
+    command = click.option("--retro", "on_retro", is_flag=True,
+                           help="instead of the cells, the table's retro rings (sensor.retro_rings): the model "
+                                "averaged over each ring, cos-weighted, against brdf_retro, each ring judged as a "
+                                "cell; no albedo, not with --points")(command)
+    return click.option("--points", "on_points", is_flag=True,
+                        help="instead of the cells, the table's points (sensor.directions_deg, "
+                             "sensor.retro_points_deg): the model at each exact direction against brdf_points "
+                             "(next-event estimation), nothing averaged; no albedo, not with --retro")(command)
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="microsim")
 def cli():
@@ -88,14 +100,17 @@ def run(config_path, **flags):
               help="compare with one scattering order of the table, orders 1 and 2 together (1+2, the "
                    "f2 of two-bounce models), or the part of order 1 that the base scattered (1-base; "
                    "scenes with a base)")
+@on_points_or_rings
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object")
 @click.option("--plot", "plot_dir", type=click.Path(file_okay=False, path_type=Path),
-              help="write PNG figures (polar maps, plane of incidence) into this directory")
-def compare(table_path, model_name, params, order, as_json, plot_dir):
-    """Average a model over the cells of TABLE.h5 and report how far it is from the simulation."""
+              help="write PNG figures (polar maps, plane of incidence) into this directory (cells only)")
+def compare(table_path, model_name, params, order, on_points, on_retro, as_json, plot_dir):
+    """Average a model over the cells of TABLE.h5 (or take it at the table's points, or average it
+    over its retro rings) and report how far it is from the simulation."""
     from . import compare as compare_module
 
     values = _model_parameters(params)
+    on = _on(on_points, on_retro, plot_dir)
     _check_plot_dir(plot_dir)
     cls = _model_class(model_name)
     with _user_model_errors(model_name):
@@ -106,8 +121,8 @@ def compare(table_path, model_name, params, order, as_json, plot_dir):
     table = _load_table(table_path)
     with _user_model_errors(model_name):
         try:
-            result = compare_module.compare(table, model, order)
-        except ValueError as err:  # NaN or infinity in the model's values (the message names it)
+            result = compare_module.COMPARE_ON[on](table, model, order)
+        except ValueError as err:  # NaN or infinity in the model's values, data the table lacks (named)
             raise BadInput(str(err)) from None
     _report(result, table, f"{model!r} vs {table_path}", as_json, plot_dir, result.as_dict())
 
@@ -120,22 +135,25 @@ def compare(table_path, model_name, params, order, as_json, plot_dir):
               help="fixed model parameter, or the starting value of a free one; repeatable")
 @click.option("--order", type=click.Choice(list(ORDER_ROWS)), default="all", show_default=True,
               help="fit one scattering order of the table (as for compare)")
+@on_points_or_rings
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object: compare's, with a key fit")
 @click.option("--plot", "plot_dir", type=click.Path(file_okay=False, path_type=Path),
-              help="write PNG figures of the best fit into this directory")
-def fit(table_path, model_name, free, params, order, as_json, plot_dir):
-    """Fit model parameters to TABLE.h5 (weighted least squares on cell averages); report them with
-    standard errors, chi-square per degree of freedom and compare's figures for the best fit."""
+              help="write PNG figures of the best fit into this directory (cells only)")
+def fit(table_path, model_name, free, params, order, on_points, on_retro, as_json, plot_dir):
+    """Fit model parameters to TABLE.h5 (weighted least squares on cell averages, or at its points,
+    or on its retro rings); report them with standard errors, chi-square per degree of freedom
+    and compare's figures for the best fit."""
     from . import fit as fit_module
     from .progress import fit_status
 
     cls = _model_class(model_name)
     values = _model_parameters(params)
+    on = _on(on_points, on_retro, plot_dir)
     _check_plot_dir(plot_dir)
     table = _load_table(table_path)
     with _user_model_errors(model_name), fit_status(cls.name) as status:
         try:
-            result = fit_module.fit(table, cls, list(free), values, order, progress=status)
+            result = fit_module.fit(table, cls, list(free), values, order, progress=status, on=on)
         except ValueError as err:
             message = " ".join(str(err).split())
             raise BadInput(message if message.startswith(("--", "table")) else f"--model {model_name}: {message}") \
@@ -191,6 +209,17 @@ def _model_parameters(params) -> dict:
     return values
 
 
+def _on(on_points: bool, on_retro: bool, plot_dir) -> str:
+    """What --points and --retro ask to compare or fit: "cells", "points" or "retro"; BadInput
+    for both, or either with --plot (the figures are of cells)."""
+    if on_points and on_retro:
+        raise BadInput("--points, --retro: give one of them (the points and the retro rings are compared apart)")
+    on = "points" if on_points else "retro" if on_retro else "cells"
+    if on != "cells" and plot_dir is not None:
+        raise BadInput(f"--plot: the figures are of the cells; leave it out with --{on}")
+    return on
+
+
 def _check_plot_dir(plot_dir) -> None:
     """BadInput unless the figures' directory ``plot_dir`` exists and is writable or can be made
     (checked before the work: a comparison or a fit can take minutes)."""
@@ -231,6 +260,8 @@ def _report(result, table, title, as_json, plot_dir, json_object) -> None:
         written = plots.write_all(result, table.sensor, plot_dir, table.path.name)
     if as_json:
         click.echo(json.dumps(json_object))
+    elif isinstance(result, compare_module.PointComparison):
+        _print_points(result, title)
     else:
         click.echo(f"{title} (order {result.order}; cells with signal: table > "
                    f"{compare_module.SIGNAL_TO_NOISE:g} standard errors; chi^2 per cell: 1 expected for the model "
@@ -253,6 +284,35 @@ def _report(result, table, title, as_json, plot_dir, json_object) -> None:
                        f"{VERDICTS[row['consistent']]:<12}{albedos}")
     if plot_dir is not None and not as_json:
         click.echo(f"{len(written)} figures written to {plot_dir}")
+
+
+def _print_points(result, title) -> None:
+    """compare's per-incidence and overall figures at the points or on the retro rings."""
+    from . import compare as compare_module
+
+    unit, _, count, _ = compare_module.ON[result.on]
+    rows = result.as_dict()
+    if result.on == "points":
+        what = ("points: the model at each exact direction (next-event estimation), every point but where both are "
+                f"0; exact points (no spread) must match to {compare_module.EXACT_POINT:g}; chi^2 per point: 1 "
+                "expected for the model of the table, bounds of 1 degree of freedom (the points' errors are "
+                "correlated)")
+    else:
+        what = (f"retro rings with signal: table > {compare_module.SIGNAL_TO_NOISE:g} standard errors; chi^2 per "
+                "ring: 1 expected for the model of the table")
+    click.echo(f"{title} (order {result.order}; {what}, {100 * (1 - compare_module.CHI2_OUTSIDE):g} % two-sided; "
+               f"consistent: within them; no albedo rows: the albedo sums the cells, not the {unit}s)")
+    click.echo(f"{'theta_i':>8} {'phi_i':>6} {unit + 's':>6} {'med|rel|':>9} {'rel rmse':>9} {'max|z|':>9} "
+               f"{'chi2/' + unit:>10} {'bounds':>18}  verdict")
+    for row in [*rows["per_incidence"], rows["overall"]]:
+        where = (f"{row['theta_i_deg']:8.1f} {row['phi_i_deg']:6.1f}" if "theta_i_deg" in row
+                 else f"{'overall':>8} {'':>6}")
+        low, high = row["chi2_bounds"]
+        click.echo(f"{where} {row[count]:6d} {row['median_abs_rel_err']:9.4f} {row['rel_rmse']:9.4f} "
+                   f"{row['max_abs_z']:9.3g} {row[f'chi2_per_{unit}']:10.3f} {f'[{low:.3g}, {high:.3g}]':>18}  "
+                   f"{VERDICTS[row['consistent']]}")
+    if rows.get("points_delta_lobes"):
+        click.echo(f"not in the points (delta lobes next-event estimation does not see): {rows['points_delta_lobes']}")
 
 
 @cli.command("models")

@@ -23,15 +23,49 @@ runs high at few paths a cell. 1 is expected, within two-sided CHI2_OUTSIDE boun
 is "consistent" with the table when chi-square lies within them and the albedo's z^2 (over the
 incidences) under its upper bound; above, it is not the table's BRDF; below, the table's errors
 are too large.
+
+Points (``--points``, :func:`compare_points`): next-event estimation's f at the exact directions
+of ``[sensor] directions_deg`` and ``retro_points_deg`` (``brdf_points``), against the model at
+those directions, nothing averaged. Nothing predicts a point's variance from the model (a point
+is no bin that paths exit into), so z = (table - model) / the point's own standard error; that
+error is estimated from R realizations, so z is Student's t of R - 1 degrees of freedom for the
+table's own BRDF, and chi-square per point is the mean of the squares of the standard normal
+numbers of the same tail probabilities (:func:`table_noise.normal_squares`), 1 in expectation
+whatever the points' correlation. That correlation is not in the table, and it is large: the
+points of an incidence share its paths (in a half space of albedo 0.9, 0.7 to 0.99 between
+points 0 to 80 degrees apart), so the 99 % bounds of chi-square of as many degrees of freedom as
+points, over their number, rejected the exact model at 30 of 80 incidences (40 tables of a
+medium traced to order 1, 6 points an incidence, 8 realizations). The bounds are those
+of chi-square of one degree of freedom, every point's error one common error
+(``chi2_bounds`` with realizations' share 1): for normal errors, whatever their correlation, the
+mean of the squares exceeds the upper one with probability at most CHI2_OUTSIDE / 2
+(Szekely and Bakirov 2003). A model off by more than its errors at many points still exceeds
+it many times over; the lower bound, near 0, tells nothing of errors too large. Every point
+is compared but those where model and table are both 0 and those that repeat another point of
+their incidence (normal incidence: the retro point at gamma = 0 is the direction [0, 0]). A
+point without spread (standard error under ``EXACT_POINT`` of its value: every path adds the
+same, as on a Lambertian plane) is exact: it stays out of chi-square, and the model must equal
+it to EXACT_POINT. Delta lobes (a mirror's, a smooth interface's) are not in the points (the
+table's attribute ``points_delta_lobes`` names them). The orders 1 and 2 together and the base's
+part of order 1 are refused: the table holds neither at its points, and the error of the sum of
+two order rows needs their covariance.
+
+Retro rings (``--retro``, :func:`compare_retro`): the model averaged over each ring about the
+retro direction with the cos(theta_o) weight (:meth:`Sensor.retro_ring_quadrature`, refined as
+the cells' rule is) against ``brdf_retro``. A ring is a bin that the paths exit into, as a cell
+is: its variance if the model were right comes from the cells' dispersion and realizations'
+scale (the same paths), and it is judged as a cell is, over the rings with signal (rings the
+horizon cuts entirely have none). Neither points nor rings have an albedo.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from .table_noise import CHI2_OUTSIDE, chi2_bounds, predicted_variance, realization_scale
+from .table_noise import CHI2_OUTSIDE, chi2_bounds, normal_squares, predicted_variance, realization_scale
 
 QUADRATURE_TOLERANCE = 0.05
 ALBEDO_TOLERANCE = 1e-4
@@ -43,6 +77,17 @@ BASE = "base"
 #: orders 1 and 2 together, brdf_orders12 (the f2 of Meneveaux et al. 2015, Sec. 3.3)
 ORDERS12 = "orders12"
 ORDER_ROWS = {"all": None, "1": 0, "2": 1, "3": 2, "4+": 3, "1+2": ORDERS12, "1-base": BASE}
+#: a point whose standard error is under this fraction of its value has no spread (every path adds
+#: the same, as on a Lambertian plane): the model must equal it to this fraction
+EXACT_POINT = 1e-9
+#: the retro rings' rules: n x 4 n nodes a ring (Sensor.retro_ring_quadrature), refined as the cells' are
+RING_RULES = (8, 16, 32, 64)
+#: what --points and --retro compare on (PointComparison.on): the word for one, the datasets, the
+#: count of those judged, and the config that makes them
+ON = {
+    "points": ("point", "brdf_points", "points_compared", "[sensor] directions_deg or retro_points_deg"),
+    "retro": ("ring", "brdf_retro", "rings_with_signal", "[sensor] retro_rings"),
+}
 
 
 @dataclass
@@ -119,6 +164,94 @@ class Comparison:
                          f"model were right; bounds: {100 * (1 - CHI2_OUTSIDE):g} % two-sided; consistent: within "
                          f"them, and the mean albedo z^2 below its {100 * (1 - CHI2_OUTSIDE / 2):g} % point",
             "quadrature_max_change_in_stderr": self.quadrature_change,
+        }
+
+
+@dataclass
+class PointComparison:
+    """Model and simulation at a table's points (``on`` = "points") or on its retro rings
+    ("retro"), with the metrics of conventions §7 but the albedo's (module doc)."""
+
+    model_name: str
+    params: dict
+    order: str
+    on: str
+    theta_i: np.ndarray
+    phi_i: np.ndarray
+    model: np.ndarray  # (n_i, n) the model at each point, or averaged over each ring
+    sim: np.ndarray  # (n_i, n)
+    stderr: np.ndarray  # (n_i, n)
+    judged: np.ndarray  # (n_i, n) bool: the points compared, the rings with signal
+    exact: np.ndarray  # (n_i, n) bool: the judged points without spread (EXACT_POINT)
+    z: np.ndarray  # (n_i, n) (table - model) / standard error (of an exact point: EXACT_POINT of its value)
+    #: (n_i, n) each judged point's or ring's share of chi-square (1 expected), and the excess
+    #: kurtosis and realizations' share of it that its bounds take (table_noise.chi2_bounds)
+    terms: np.ndarray
+    kurtosis: np.ndarray
+    common: np.ndarray
+    quadrature_change: float  # rings: the largest last-refinement change, in standard errors
+    notes: dict  # keys added to as_dict
+
+    def metrics(self, i: int | None = None) -> dict:
+        """The metrics of one incidence, or over all incidences (``i=None``)."""
+        rows = slice(None) if i is None else slice(i, i + 1)
+        m, s, ok, exact = self.model[rows], self.sim[rows], self.judged[rows], self.exact[rows]
+        seen = ok & (s > 0)  # a relative error where the table has light
+        rel = (m[seen] - s[seen]) / s[seen]
+        z = self.z[rows][ok]
+        noisy = ok & ~exact
+        chi2 = float(np.mean(self.terms[rows][noisy])) if noisy.any() else float("nan")
+        low, high = chi2_bounds(self.kurtosis[rows][noisy], self.common[rows][noisy])
+        agree = not np.any(np.abs(self.z[rows][exact]) > 1.0)
+        unit, _, count, _ = ON[self.on]
+        out = {
+            count: int(ok.sum()),
+            "median_abs_rel_err": float(np.median(np.abs(rel))) if rel.size else float("nan"),
+            "rel_rmse": float(np.sqrt(np.mean(rel**2))) if rel.size else float("nan"),
+            "max_abs_z": float(np.max(np.abs(z))) if z.size else float("nan"),
+            f"chi2_per_{unit}": chi2,
+            "chi2_expected": 1.0,
+            "chi2_bounds": [low, high],
+            # None where nothing is judged
+            "consistent": bool(agree and (not noisy.any() or low <= chi2 <= high)) if ok.any() else None,
+        }
+        if self.on == "points":
+            out["points_without_spread"] = int(exact.sum())
+        if i is not None:
+            out = {"theta_i_deg": _degrees(self.theta_i[i]), "phi_i_deg": _degrees(self.phi_i[i]), **out}
+        return out
+
+    def as_dict(self) -> dict:
+        if self.on == "points":
+            rules = {
+                "points_rule": "every point but those where model and table are both 0 and those that repeat "
+                               f"another of their incidence; a point without spread (standard error under "
+                               f"{EXACT_POINT:g} of its value) is exact: out of chi-square, the model must equal it "
+                               f"to {EXACT_POINT:g}",
+                "chi2_rule": "mean over the points with spread of u^2, u the standard normal number of the tail "
+                             "probability of z = (table - model) / stderr under Student's t of realizations - 1 "
+                             f"degrees of freedom; bounds: {100 * (1 - CHI2_OUTSIDE):g} % two-sided, of chi-square "
+                             "of 1 degree of freedom whatever the number of points (they share their paths, and "
+                             "the table holds no correlation between them); consistent: within them, and every "
+                             "exact point equal",
+            }
+        else:
+            rules = {
+                "signal_rule": f"table value > {SIGNAL_TO_NOISE:g} standard errors, on rings above the horizon",
+                "chi2_rule": "mean over the rings with signal of (model - table)^2 / v, v the ring's variance if "
+                             "the model were right (from the cells' dispersion: the same paths); bounds: "
+                             f"{100 * (1 - CHI2_OUTSIDE):g} % two-sided; consistent: within them",
+                "quadrature_max_change_in_stderr": self.quadrature_change,
+            }
+        return {
+            "model": self.model_name,
+            "params": self.params,
+            "order": self.order,
+            "on": self.on,
+            "per_incidence": [self.metrics(i) for i in range(len(self.theta_i))],
+            "overall": self.metrics(),
+            **rules,
+            **self.notes,
         }
 
 
@@ -204,7 +337,114 @@ def compare(table, model, order: str = "all", **params) -> Comparison:
                       signal, modelled @ p, albedo_sim, albedo_se, worst,
                       *predicted_variance(modelled, sim, stderr, signal, p,
                                           realization_scale(sim, stderr, albedo_sim, albedo_se, p, table.paths,
-                                                            int(table.attrs.get("realizations", 2)))))
+                                                            _realizations(table))))
+
+
+def compare_points(table, model, order: str = "all", **params) -> PointComparison:
+    """``model`` at the table's points against next-event estimation's f there (module doc),
+    arguments as :func:`compare`'s; ValueError (one line) for a table without points, an order
+    they do not hold, or no point to compare."""
+    from .models import as_model
+
+    model = as_model(model, **params)
+    sim, stderr = extra_selection(table, order, "points")
+    directions = table.arrays["sensor/points_direction"]
+    modelled = np.stack([model(np.broadcast_to(wi, d.shape), d) for wi, d in zip(table.wi, directions)])
+    _require_finite(modelled, f"model {model!r}", "points")
+    size = np.maximum(np.abs(sim), np.abs(modelled))
+    judged = (size > 0) & ~repeated_points(directions)
+    if not judged.any():
+        raise ValueError(f"--points: table {table.path}: the model and the table are 0 at every point of order "
+                         f"{order}: nothing to compare")
+    exact = judged & (stderr <= EXACT_POINT * size)
+    error = np.where(exact, EXACT_POINT * size, stderr)
+    z = np.divide(sim - modelled, error, out=np.zeros_like(sim), where=judged)
+    terms = np.where(judged & ~exact, normal_squares(z, _realizations(table)), 0.0)
+    # correlation unknown: the bounds of one error common to every point (module doc)
+    return PointComparison(model.name, dict(model.values), order, "points", table.theta_i, table.phi_i, modelled,
+                           sim, stderr, judged, exact, z, terms, np.zeros_like(sim), np.ones_like(sim), 0.0,
+                           {"points_delta_lobes": str(table.attrs.get("points_delta_lobes", ""))})
+
+
+def compare_retro(table, model, order: str = "all", **params) -> PointComparison:
+    """``model`` averaged over the table's retro rings against ``brdf_retro`` (module doc),
+    arguments as :func:`compare`'s; ValueError (one line) for a table without rings, an order
+    they do not hold, or no ring with signal."""
+    from .models import as_model
+
+    model = as_model(model, **params)
+    sim, stderr = extra_selection(table, order, "retro")
+    sensor = retro_sensor(table)
+    projected = table.arrays["sensor/retro_projected_solid_angle"]
+    modelled = np.zeros_like(sim)
+    worst = 0.0
+    for i, wi in enumerate(table.wi):
+        modelled[i], change, _ = ring_averages(model, sensor, wi, stderr[i])
+        worst = max(worst, change)
+    _require_finite(modelled, f"model {model!r}", "retro rings")
+    _, cells, cells_stderr, albedo, albedo_stderr = selection(table, order)
+    p = table.projected_solid_angle
+    scale = realization_scale(cells, cells_stderr, albedo, albedo_stderr, p, table.paths, _realizations(table))
+    variance, kurtosis, common = predicted_variance(modelled, cells, cells_stderr, with_signal(cells, cells_stderr),
+                                                    p, scale, at=projected)
+    # a ring the horizon cuts entirely has no value and no variance; nor has one of an incidence
+    # without a cell of signal, whose paths' dispersion is unknown
+    judged = with_signal(sim, stderr) & (variance > 0)
+    if not judged.any():
+        raise ValueError(f"--retro: table {table.path}: no retro ring of order {order} has signal (a value above "
+                         f"{SIGNAL_TO_NOISE:g} standard errors): nothing to compare; trace more paths or use fewer "
+                         "rings")
+    zeros = np.zeros_like(sim)
+    z = np.divide(sim - modelled, stderr, out=zeros.copy(), where=judged)
+    terms = np.divide((modelled - sim) ** 2, variance, out=zeros.copy(), where=judged)
+    return PointComparison(model.name, dict(model.values), order, "retro", table.theta_i, table.phi_i, modelled,
+                           sim, stderr, judged, np.zeros_like(judged), z, terms, kurtosis, common, worst, {})
+
+
+#: what compares a model with a table, by what it compares on
+COMPARE_ON = {"cells": compare, "points": compare_points, "retro": compare_retro}
+
+
+def ring_averages(model, sensor, wi: np.ndarray, stderr: np.ndarray, tolerance: float = QUADRATURE_TOLERANCE):
+    """``model`` averaged over every retro ring of ``sensor`` about wi, cos-weighted (n x 4 n
+    nodes a ring, n of RING_RULES), refined until no ring moves by more than ``tolerance`` of
+    its standard error (a ring without one: ALBEDO_TOLERANCE of its value). Returns the
+    averages, the largest last change in standard errors and the n settled on (which
+    :class:`RingRule` can hold fixed)."""
+    previous, change = None, np.zeros(len(stderr))
+    for n in RING_RULES:
+        averages = RingRule(sensor, wi, n).averages(model)
+        if previous is not None:
+            floor = np.where(stderr > 0, stderr, ALBEDO_TOLERANCE * np.abs(averages) / tolerance)
+            change = np.divide(np.abs(averages - previous), floor, out=np.zeros_like(floor), where=floor > 0)
+            if change.max(initial=0.0) <= tolerance:
+                break
+        previous = averages
+    return averages, float(change.max(initial=0.0)), n
+
+
+class RingRule:
+    """A fixed quadrature of every retro ring about wi, n x 4 n nodes a ring, as
+    :class:`CellRule` is of the cells."""
+
+    def __init__(self, sensor, wi: np.ndarray, n: int):
+        self.nodes, self.weights = sensor.retro_ring_quadrature(wi, n, 4 * n)
+        self.wi = np.broadcast_to(wi, self.nodes.shape)
+
+    def averages(self, model) -> np.ndarray:
+        return np.sum(model(self.wi, self.nodes) * self.weights, axis=1)
+
+
+def retro_sensor(table):
+    """The table's sensor with its retro rings, rebuilt from their bounds (uniform in the chord
+    2 sin(gamma / 2) out to the last ring's gamma_hi) and checked against them (ValueError)."""
+    lo, hi = table.arrays["sensor/retro_gamma_lo"], table.arrays["sensor/retro_gamma_hi"]
+    sensor = table.sensor.with_retro_rings(len(lo), math.degrees(hi[-1]))
+    if not all(np.allclose(mine, stored, rtol=0.0, atol=1e-9)
+               for mine, stored in zip(sensor.retro_phase_bounds(), (lo, hi))):
+        raise ValueError(f"--retro: table {table.path}: its rings (sensor/retro_gamma_lo, sensor/retro_gamma_hi) are "
+                         "not uniform in the chord 2 sin(gamma / 2), as microsim writes them")
+    return sensor
 
 
 def albedo_bound(incidences: int) -> float:
@@ -238,6 +478,46 @@ def selection(table, order: str):
     return selected
 
 
+def extra_selection(table, order: str, on: str):
+    """(f, its standard error) of the table's points (``on`` = "points") or retro rings
+    ("retro") of ``order``, each (n_i, n), checked present and finite (ValueError, one line)."""
+    if order not in ORDER_ROWS:
+        raise ValueError(f"order {order!r}; accepted: {', '.join(ORDER_ROWS)}")
+    _, name, _, config = ON[on]
+    row = ORDER_ROWS[order]
+    if row == ORDERS12:
+        raise ValueError(f"--order 1+2 with --{on}: the table holds its {name} by order but not the covariance of "
+                         "orders 1 and 2, which the error of their sum needs; compare --order 1 and --order 2 apart")
+    if row == BASE:
+        raise ValueError(f"--order 1-base with --{on}: the table holds no base part of order 1 in {name}")
+    dataset = name if row is None else f"{name}_order"
+    geometry = ("sensor/points_direction",) if on == "points" else \
+        ("sensor/retro_gamma_lo", "sensor/retro_gamma_hi", "sensor/retro_projected_solid_angle")
+    missing = [k for k in (dataset, f"{dataset}_stderr", *geometry) if k not in table.arrays]
+    if missing:
+        raise ValueError(f"--{on}: table {table.path} has no {', '.join(missing)} (its config has no {config}, or it "
+                         "was written before they existed)")
+    names = (dataset, f"{dataset}_stderr")
+    values, stderr = (table.arrays[k] if row is None else table.arrays[k][:, row] for k in names)
+    for k, v in zip(names, (values, stderr)):
+        _require_finite(v, f"table {table.path}: {k} (order {order})", ON[on][0] + "s")
+    return values, stderr
+
+
+def repeated_points(directions: np.ndarray) -> np.ndarray:
+    """(n_i, n_d) True where a point's direction (n_i, n_d, 3) is an earlier point's of its
+    incidence (normal incidence: the retro point at gamma = 0 is the direction [0, 0]): the same
+    estimate, compared once."""
+    gap = np.linalg.norm(directions[:, :, None] - directions[:, None, :], axis=-1)
+    earlier = np.tril(np.ones(gap.shape[1:], bool), -1)
+    return np.any((gap < 1e-12) & earlier, axis=2)
+
+
+def _realizations(table) -> int:
+    """The realizations a table's standard errors come from."""
+    return int(table.attrs.get("realizations", 2))
+
+
 def _selected(table, row):
     """(dataset names, f_C, its standard error, albedo, its standard error) of an ORDER_ROWS row."""
     a = table.arrays
@@ -256,7 +536,7 @@ def _degrees(radians: float) -> float:
     return round(float(np.degrees(radians)), 9)
 
 
-def _require_finite(values: np.ndarray, what: str) -> None:
-    """Raise ValueError naming ``what`` if any cell is NaN or infinite."""
+def _require_finite(values: np.ndarray, what: str, unit: str = "cells") -> None:
+    """Raise ValueError naming ``what`` if any cell (or other ``unit``) is NaN or infinite."""
     if bad := np.count_nonzero(~np.isfinite(values)):
-        raise ValueError(f"{what} is NaN or infinite in {bad} of {values.size} cells")
+        raise ValueError(f"{what} is NaN or infinite in {bad} of {values.size} {unit}")

@@ -43,11 +43,27 @@ sank an exact model's chi-square per degree of freedom far below 1). The best mo
 compared with the table exactly as ``compare`` does.
 
 (measurements of the rejected weights, covariance and choice of cells: docs/developer/performance.md,
-section 'Fits and chi-square: weights, covariance and cells (issue 24)')"""
+section 'Fits and chi-square: weights, covariance and cells (issue 24)')
+
+``on="retro"`` (``--retro``) fits the retro rings instead, as the cells: a ring is a bin that the
+paths exit into, weighed by the variance the model predicts from the cells' dispersion (the same
+paths), every ring above the horizon of the incidences whose cells have signal, each averaged by
+a rule found at the starting parameters and held fixed (``compare.RingRule``). ``on="points"``
+(``--points``) fits next-event estimation's f at the table's points, each weighed by its own
+standard error (nothing predicts a point's variance; an exact point, without spread, by
+``compare.EXACT_POINT`` of its value; a point where the table holds 0 without spread is left
+out): the weights are fixed, and one solve ends the fit. The points share their paths and the
+table holds no correlation between them, so a parameter's standard error is the bound that
+holds whatever it is, sum_j |a_j| s_j for the parameter's row a of the least-squares solution
+and the points' errors s (for independent points sqrt(sum_j a_j^2 s_j^2), up to sqrt(n) times
+smaller), and the degrees of freedom are the points less the free parameters. Its chi-square
+per degree of freedom counts z^2, each of mean (R - 1) / (R - 3) for an exact model with errors
+from R realizations. The best model is compared as ``compare`` compares on the same."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -70,9 +86,9 @@ class Fit:
 
     free: dict  # name -> (value, standard error)
     chi2_per_dof: float
-    dof: float  # the cells' expected share of chi-square, less the free parameters (module doc)
+    dof: float  # the cells' (rings') expected share of chi-square or the points, less the free parameters
     evaluations: int
-    comparison: compare.Comparison
+    comparison: compare.Comparison | compare.PointComparison
 
     def as_dict(self) -> dict:
         """The ``compare`` JSON with the key ``fit`` added."""
@@ -83,13 +99,15 @@ class Fit:
         return out
 
 
-def fit(table, model, free: list[str], fixed: dict | None = None, order: str = "all", progress=None) -> Fit:
+def fit(table, model, free: list[str], fixed: dict | None = None, order: str = "all", progress=None,
+        on: str = "cells") -> Fit:
     """Fit the ``free`` parameters of ``model`` to ``table``; ``fixed`` holds the other
     parameters, and starting values for free ones. ``model``: a registered model's name, a
     :class:`~microsim.models.BRDFModel` subclass or a plain function ``f(wi, wo, **params)``
     (:mod:`microsim.models.user_models`). ``progress(evaluations, values)``, if given, is called
     after every evaluation of the model over the table's cells (``values``: the free parameters
-    evaluated). Raises ValueError (one line) for a bad name, value or table."""
+    evaluated). ``on``: what is fitted, "cells", "retro" (the retro rings) or "points" (module
+    doc). Raises ValueError (one line) for a bad name, value or table."""
     if isinstance(model, models.BRDFModel):
         raise ValueError(f"{model!r}: fit takes a model's name, class or function, whose parameters it varies, "
                          "not a model made already (give its parameters as fixed ones)")
@@ -115,11 +133,73 @@ def fit(table, model, free: list[str], fixed: dict | None = None, order: str = "
         return cls(**others, **dict(zip(free, (float(v) for v in x))))
 
     first = model_at(start)  # a bad fixed parameter fails here, in one line
+    if on not in FITTED_ON:
+        raise ValueError(f"on {on!r}; accepted: {', '.join(FITTED_ON)}")
+    data = FITTED_ON[on](table, first, order, len(free))
+    evaluated = [0]
+
+    def values(x):
+        out = data.evaluate(model_at(x))
+        evaluated[0] += 1
+        if progress is not None:
+            progress(evaluated[0], dict(zip(free, (float(v) for v in x))))
+        return out
+
+    x, evaluations = start, 0
+    for _ in range(REWEIGHTS):
+        sigma = data.sigma(values(x))
+        solution = least_squares(lambda x: (values(x) - data.f) / sigma, x, bounds=bounds, method="trf",
+                                 x_scale="jac")
+        evaluations += solution.nfev
+        errors = data.errors(solution.jac, sigma, table.paths)
+        moved, x = np.abs(solution.x - x), solution.x
+        if data.per_path is None or np.all(moved <= CONVERGED * errors):
+            break
+    dof = data.dof(values(solution.x)) - len(free)
+    chi2 = float(np.sum(solution.fun**2))
+    best = model_at(solution.x)
+    return Fit({name: (float(v), float(e)) for name, v, e in zip(free, solution.x, errors)}, chi2 / dof, dof,
+               int(evaluations), compare.COMPARE_ON[on](table, best, order))
+
+
+@dataclass
+class _Fitted:
+    """What a fit fits (module doc): the table's values ``f`` at its fitted cells, retro rings or
+    points, their standard errors ``observed`` and ``incidence``, and ``evaluate(model)``, the
+    model's values there. Cells and rings are weighed by the variance the model predicts, ``per_path``
+    max(m, ``floor``), with the realizations' ``scale`` in their errors; points (``per_path``
+    None) by ``observed``."""
+
+    f: np.ndarray
+    observed: np.ndarray
+    incidence: np.ndarray
+    evaluate: Callable
+    per_path: np.ndarray | None = None
+    floor: np.ndarray | None = None
+    scale: np.ndarray | None = None
+
+    def sigma(self, values) -> np.ndarray:
+        """The standard error each fitted value is weighed by, the model's being ``values``."""
+        return self.observed if self.per_path is None else np.sqrt(self.per_path * np.maximum(values, self.floor))
+
+    def errors(self, jac, sigma, paths) -> np.ndarray:
+        """The parameters' standard errors (module doc)."""
+        if self.per_path is None:
+            return _bounding_errors(jac)
+        return _sandwich_errors(jac, sigma, self.f, self.observed, self.incidence, paths, self.scale)
+
+    def dof(self, values) -> float:
+        """Chi-square's expected value at the model's ``values``, before the free parameters."""
+        return float(self.f.size) if self.per_path is None else float(np.sum(np.minimum(1.0, values / self.floor)))
+
+
+def _cells(table, first, order: str, n_free: int) -> _Fitted:
+    """The cells to fit (module doc), their quadrature found for the model ``first``."""
     _, sim, stderr, albedo, albedo_stderr = compare.selection(table, order)  # checks the order and the values
     signal = compare.with_signal(sim, stderr)
-    if signal.sum() <= len(free):
+    if signal.sum() <= n_free:
         raise ValueError(f"table {table.path}: {int(signal.sum())} cells with signal, too few to fit "
-                         f"{len(free)} parameters")
+                         f"{n_free} parameters")
     # every cell, none chosen by its own value (module doc), of the incidences whose cells with
     # signal tell the paths' dispersion
     fitted = np.broadcast_to(signal.any(axis=1)[:, None], signal.shape)
@@ -127,42 +207,66 @@ def fit(table, model, free: list[str], fixed: dict | None = None, order: str = "
     rules = [compare.CellRule(table.sensor, wi,
                               compare.refined_cell_averages(first, table.sensor, wi, stderr[i], tolerance)[2])
              for i, wi in enumerate(table.wi)]
-
     incidence = np.nonzero(fitted)[0]  # the incidence of each fitted cell
-    f, observed = sim[fitted], stderr[fitted]
     dispersion, floor = table_noise.variance_model(sim, stderr, signal, table.projected_solid_angle)
-    per_path, floor = (dispersion[:, None] / table.projected_solid_angle)[fitted], floor[incidence]
     scale = table_noise.realization_scale(sim, stderr, albedo, albedo_stderr, table.projected_solid_angle,
                                           table.paths, int(table.attrs["realizations"]))
+    return _Fitted(sim[fitted], stderr[fitted], incidence,
+                   lambda model: np.concatenate([rule.averages(model)[fitted[i]] for i, rule in enumerate(rules)]),
+                   (dispersion[:, None] / table.projected_solid_angle)[fitted], floor[incidence], scale)
 
-    evaluated = [0]
 
-    def cell_averages(x):
-        model = model_at(x)
-        averages = np.concatenate([rule.averages(model)[fitted[i]] for i, rule in enumerate(rules)])
-        evaluated[0] += 1
-        if progress is not None:
-            progress(evaluated[0], dict(zip(free, (float(v) for v in x))))
-        return averages
+def _rings(table, first, order: str, n_free: int) -> _Fitted:
+    """The retro rings to fit (module doc), their quadrature found for the model ``first``."""
+    sim, stderr = compare.extra_selection(table, order, "retro")
+    sensor = compare.retro_sensor(table)
+    projected = table.arrays["sensor/retro_projected_solid_angle"]
+    _, cells, cells_stderr, albedo, albedo_stderr = compare.selection(table, order)
+    cells_signal = compare.with_signal(cells, cells_stderr)
+    signal = compare.with_signal(sim, stderr) & (projected > 0)
+    if signal.sum() <= n_free:
+        raise ValueError(f"--retro: table {table.path}: {int(signal.sum())} retro rings with signal, too few to fit "
+                         f"{n_free} parameters")
+    fitted = (projected > 0) & cells_signal.any(axis=1)[:, None]
+    tolerance = compare.QUADRATURE_TOLERANCE / math.sqrt(fitted.sum())
+    rules = [compare.RingRule(sensor, wi, compare.ring_averages(first, sensor, wi, stderr[i], tolerance)[2])
+             for i, wi in enumerate(table.wi)]
+    incidence = np.nonzero(fitted)[0]
+    dispersion, floor = table_noise.variance_model(cells, cells_stderr, cells_signal, table.projected_solid_angle)
+    scale = table_noise.realization_scale(cells, cells_stderr, albedo, albedo_stderr, table.projected_solid_angle,
+                                          table.paths, int(table.attrs["realizations"]))
+    return _Fitted(sim[fitted], stderr[fitted], incidence,
+                   lambda model: np.concatenate([rule.averages(model)[fitted[i]] for i, rule in enumerate(rules)]),
+                   dispersion[incidence] / projected[fitted], floor[incidence], scale)
 
-    def predicted_stderr(x):
-        return np.sqrt(per_path * np.maximum(cell_averages(x), floor))
 
-    x, evaluations = start, 0
-    for _ in range(REWEIGHTS):
-        sigma = predicted_stderr(x)
-        solution = least_squares(lambda x: (cell_averages(x) - f) / sigma, x, bounds=bounds, method="trf",
-                                 x_scale="jac")
-        evaluations += solution.nfev
-        errors = _sandwich_errors(solution.jac, sigma, f, observed, incidence, table.paths, scale)
-        moved, x = np.abs(solution.x - x), solution.x
-        if np.all(moved <= CONVERGED * errors):
-            break
-    dof = float(np.sum(np.minimum(1.0, cell_averages(solution.x) / floor))) - len(free)
-    chi2 = float(np.sum(solution.fun**2))
-    best = model_at(solution.x)
-    return Fit({name: (float(v), float(e)) for name, v, e in zip(free, solution.x, errors)}, chi2 / dof, dof,
-               int(evaluations), compare.compare(table, best, order))
+def _points(table, first, order: str, n_free: int) -> _Fitted:
+    """The points to fit (module doc); ``first`` is not needed (no quadrature)."""
+    sim, stderr = compare.extra_selection(table, order, "points")
+    directions = table.arrays["sensor/points_direction"]
+    error = np.maximum(stderr, compare.EXACT_POINT * np.abs(sim))
+    fitted = (error > 0) & ~compare.repeated_points(directions)
+    if fitted.sum() <= n_free:
+        raise ValueError(f"--points: table {table.path}: {int(fitted.sum())} points with a value, too few to fit "
+                         f"{n_free} parameters")
+    incidence = np.nonzero(fitted)[0]
+    wi, wo = table.wi[incidence], directions[fitted]
+    return _Fitted(sim[fitted], error[fitted], incidence, lambda model: model(wi, wo))
+
+
+#: what a fit fits, by ``on``
+FITTED_ON = {"cells": _cells, "retro": _rings, "points": _points}
+
+
+def _bounding_errors(jac) -> np.ndarray:
+    """Standard errors of parameters fitted with residuals of unit variance and unknown
+    correlation, Jacobian ``jac``: sum_j |a_j| for each parameter's row a of (J^T J)^-1 J^T, the
+    largest whatever the correlation; infinite for a parameter the table does not constrain."""
+    try:
+        solve = np.linalg.inv(jac.T @ jac) @ jac.T
+    except np.linalg.LinAlgError:
+        return np.full(jac.shape[1], math.inf)
+    return np.sum(np.abs(solve), axis=1)
 
 
 def _sandwich_errors(jac, sigma, f, stderr, incidence, paths, scale) -> np.ndarray:

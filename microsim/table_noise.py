@@ -25,6 +25,11 @@ kappa_C the excess kurtosis of its paths' share, 1 / (the paths' worth max(m_C, 
 the paths' part is independent from cell to cell (their tie through a path's one exit is left
 out), the realizations' part one common number. The bounds are the two-sided CHI2_OUTSIDE points
 of the gamma distribution of mean 1 and that variance.
+
+The retro rings are bins that the same paths exit into: their variance is predicted from the
+cells' dispersion (``predicted_variance(..., at=)``). The points of next-event estimation are
+not bins, and nothing predicts theirs: a point is judged by its own standard error, whose
+randomness (R realizations) :func:`normal_squares` takes into account.
 """
 
 from __future__ import annotations
@@ -57,16 +62,19 @@ def _positive(values) -> np.ndarray:
     return np.where(values > 0, values, 1.0)
 
 
-def predicted_variance(model_values, sim, stderr, signal, projected, scale) -> tuple[np.ndarray, ...]:
+def predicted_variance(model_values, sim, stderr, signal, projected, scale, at=None) -> tuple[np.ndarray, ...]:
     """(variance v_C, the paths' excess kurtosis kappa_C, the realizations' share a_C), each
     (n_i, n_c), of every cell's estimate if the table's BRDF were ``model_values`` (module doc);
     ``scale``: :func:`realization_scale` of each incidence. The paths' dispersion k' is the pooled
     k less what the realizations add to it, g sum(f_C^2 P_C) / sum(f_C) (at least
-    VARIANCE_FLOOR of k)."""
+    VARIANCE_FLOOR of k). ``at``: (n_i, n) projected solid angles of other bins that the same
+    paths exit into (the retro rings), whose ``model_values`` these are instead of the cells'
+    (a bin of projected solid angle 0 has no paths' share)."""
     dispersion, floor = variance_model(sim, stderr, signal, projected)
     shared = scale * _over_signal(sim**2 * projected, signal) / _positive(_over_signal(sim, signal))
     own = np.maximum(dispersion - shared, VARIANCE_FLOOR * dispersion)
-    per_path = own[:, None] / projected
+    at = np.broadcast_to(projected, model_values.shape) if at is None else at
+    per_path = np.divide(own[:, None], at, out=np.zeros(model_values.shape), where=at > 0)
     floored = np.maximum(model_values, floor[:, None])
     common = scale[:, None] * model_values**2
     variance = per_path * floored + common
@@ -89,6 +97,20 @@ def chi2_bounds(kurtosis: np.ndarray, common: np.ndarray) -> tuple[float, float]
     shape = 1.0 / variance
     low, high = gamma.ppf([CHI2_OUTSIDE / 2, 1 - CHI2_OUTSIDE / 2], shape, scale=1.0 / shape)
     return float(low), float(high)
+
+
+def normal_squares(z, realizations: int) -> np.ndarray:
+    """Squares of the standard normal numbers of the same tail probabilities as ``z``, each a
+    difference over a standard error from ``realizations`` realizations: Student's t of
+    realizations - 1 degrees of freedom if the difference has mean 0 (exact for normal
+    realizations, whatever their number). Their mean over n values is 1 in expectation, and for
+    independent ones chi-square of n degrees of freedom over n (:func:`chi2_bounds` with
+    kurtoses and shares 0; of one common error, shares 1: one degree of freedom); mean z^2
+    itself is (R - 1) / (R - 3), with infinite variance below R = 5."""
+    from scipy.special import ndtri_exp
+    from scipy.stats import t
+
+    return ndtri_exp(t.logsf(np.abs(z), realizations - 1)) ** 2
 
 
 def realization_scale(sim, stderr, albedo, albedo_stderr, projected, paths, realizations) -> np.ndarray:

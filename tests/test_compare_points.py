@@ -1,0 +1,224 @@
+"""`microsim compare` and `microsim fit` with --points (next-event estimation's f at exact
+directions) and --retro (the retro rings), against exact BRDFs.
+
+- A half space of Lambert-sphere scatterers traced to order 1: its BRDF is c p(-wi . wo) /
+  (mu_i + mu_o) exactly, at every point and averaged over every ring; the exact model is
+  consistent, one of another albedo is not, and a fit finds the albedo.
+- A Lambertian plane: every point is exactly albedo / pi with no spread, so the model must equal
+  it (to compare.EXACT_POINT), and a fit is exact.
+- Bad input (no such datasets, both flags, an order the points do not hold, --plot): one line,
+  exit 2.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from microsim import compare, session, tables
+from microsim.cli import main
+from microsim.models.radiative_transfer import single_scattering
+
+ALBEDO = 0.9
+#: a user's model of the medium traced to order 1: path.py:Single on the command line
+MODEL_FILE = '''
+from microsim.models.radiative_transfer import single_scattering
+
+
+def Single(wi, wo, albedo=0.9):
+    return single_scattering(wi, wo, albedo)
+'''
+
+
+def single(wi, wo, albedo=ALBEDO):
+    """The medium's BRDF at order 1 (a plain function: compare's model)."""
+    return single_scattering(wi, wo, albedo)
+
+
+def medium_config(**sensor) -> dict:
+    return {"scene": {"kind": "halfspace_medium", "phase": "lambert_sphere"},
+            "material": {"kind": "lambert", "albedo": ALBEDO},
+            "illumination": {"theta_i_deg": [0.0, 60.0]},
+            "sensor": {"cells": 100, **sensor},
+            "run": {"paths": 200_000, "realizations": 8, "max_order": 1, "seed": 7}}
+
+
+@pytest.fixture(scope="module")
+def medium(tmp_path_factory):
+    """(table, the model's spec on the command line): the half space at order 1 with 4 directions,
+    2 retro points and 6 retro rings out to 30 degrees, 2 x 200 000 paths."""
+    directory = tmp_path_factory.mktemp("points")
+    (directory / "single.py").write_text(MODEL_FILE)
+    cfg = medium_config(directions_deg=[[0, 0], [45, 90], [60, 180], [80, 0]], retro_points_deg=[0, 5],
+                        retro_rings=6, retro_max_deg=30)
+    path = session.run(cfg, directory / "medium.h5").tables[0]
+    return path, f"{directory / 'single.py'}:Single"
+
+
+@pytest.fixture(scope="module")
+def cells_only(tmp_path_factory):
+    """The same half space with cells only: no points, no retro rings."""
+    return session.run(medium_config(), tmp_path_factory.mktemp("cells") / "cells.h5").tables[0]
+
+
+@pytest.fixture(scope="module")
+def plane(tmp_path_factory):
+    cfg = {"scene": {"kind": "plane"}, "material": {"kind": "lambert", "albedo": 0.5},
+           "illumination": {"theta_i_deg": [0.0, 50.0]},
+           "sensor": {"cells": 50, "directions_deg": [[0, 0], [30, 45], [89, 270]], "retro_points_deg": [0, 3]},
+           "run": {"paths": 20_000, "realizations": 4, "seed": 2}}
+    return session.run(cfg, tmp_path_factory.mktemp("plane") / "plane.h5").tables[0]
+
+
+def run_json(capsys, command, *argv) -> dict:
+    assert main([command, *map(str, argv), "--json"]) == 0, capsys.readouterr().err
+    out = capsys.readouterr().out.strip().splitlines()
+    assert len(out) == 1
+    return json.loads(out[0])
+
+
+def within(row, unit) -> bool:
+    low, high = row["chi2_bounds"]
+    return low <= row[f"chi2_per_{unit}"] <= high
+
+
+# ------------------------------------------------------------------------------- the points
+
+
+def test_the_exact_model_is_consistent_at_the_points_and_another_albedo_is_not(medium, capsys):
+    path, spec = medium
+    exact = run_json(capsys, "compare", path, "--model", spec, "--order", "1", "--points")
+    assert exact["on"] == "points" and exact["order"] == "1"
+    for row in [*exact["per_incidence"], exact["overall"]]:
+        assert row["consistent"] and within(row, "point"), row
+        assert row["median_abs_rel_err"] < 0.01 and "albedo_sim" not in row
+    # normal incidence: the retro point at gamma = 0 is the direction [0, 0], compared once
+    assert [row["points_compared"] for row in exact["per_incidence"]] == [5, 6]
+    # a bound of one degree of freedom, whatever the number of points (their errors are correlated)
+    assert exact["overall"]["chi2_bounds"][1] == pytest.approx(7.879, abs=1e-3)
+    off = run_json(capsys, "compare", path, "--model", spec, "--order", "1", "--points", "--param", "albedo=0.88")
+    for row in [*off["per_incidence"], off["overall"]]:
+        assert not row["consistent"] and row["chi2_per_point"] > row["chi2_bounds"][1], row
+
+
+def test_the_z_scores_are_the_points_own(medium):
+    """z = (table - model) / stderr at each point, model f at the stored directions."""
+    path, _ = medium
+    table = tables.load(path)
+    result = compare.compare_points(table, single, "all")
+    sim, stderr = table.arrays["brdf_points"], table.arrays["brdf_points_stderr"]
+    wo = table.arrays["sensor/points_direction"]
+    exact = np.stack([single_scattering(wi, d, ALBEDO) for wi, d in zip(table.wi, wo)])
+    np.testing.assert_allclose(result.model, exact, rtol=1e-12)
+    kept = result.judged
+    assert kept.sum() == 11 and not kept[0, 4]  # the repeat of [0, 0] at normal incidence
+    z = (sim - exact) / stderr
+    assert result.as_dict()["overall"]["max_abs_z"] == pytest.approx(np.abs(z[kept]).max(), rel=1e-9)
+    assert np.array_equal(table.arrays["brdf_points_order"][:, 0], sim)  # order 1 is all there is
+
+
+def test_a_fit_at_the_points_finds_the_albedo(medium, capsys):
+    path, spec = medium
+    result = run_json(capsys, "fit", path, "--model", spec, "--free", "albedo", "--param", "albedo=0.5",
+                      "--order", "1", "--points")
+    value, error = result["fit"]["albedo"]["value"], result["fit"]["albedo"]["stderr"]
+    assert abs(value - ALBEDO) < 3 * error and error < 0.005, result["fit"]
+    assert result["on"] == "points" and result["overall"]["consistent"]
+    assert result["fit_dof"] == 11 - 1
+
+
+# ------------------------------------------------------------------------------- the retro rings
+
+
+def test_the_exact_model_is_consistent_on_the_retro_rings_and_another_albedo_is_not(medium, capsys):
+    path, spec = medium
+    exact = run_json(capsys, "compare", path, "--model", spec, "--order", "1", "--retro")
+    assert exact["on"] == "retro"
+    for row in [*exact["per_incidence"], exact["overall"]]:
+        assert row["consistent"] and within(row, "ring") and row["rings_with_signal"] >= 5, row
+    assert exact["quadrature_max_change_in_stderr"] <= compare.QUADRATURE_TOLERANCE
+    off = run_json(capsys, "compare", path, "--model", spec, "--order", "1", "--retro", "--param", "albedo=0.8")
+    assert not off["overall"]["consistent"] and off["overall"]["chi2_per_ring"] > off["overall"]["chi2_bounds"][1]
+
+
+def test_ring_averages_are_the_cos_weighted_mean_over_each_ring(medium):
+    """The quadrature against the mean over random directions on the sphere that fall in each
+    ring, weighted by cos(theta_o): 60 degrees incidence, rings out to 30 degrees (cut by the
+    horizon only where the last ring touches it)."""
+    path, _ = medium
+    table = tables.load(path)
+    sensor = compare.retro_sensor(table)
+    wi = table.wi[1]
+    averages, _, _ = compare.ring_averages(single, sensor, wi, np.full(sensor.retro_rings, 1e-6))
+    rng = np.random.default_rng(4)
+    v = rng.normal(size=(2_000_000, 3))
+    v /= np.linalg.norm(v, axis=1)[:, None]
+    ring = np.floor(np.linalg.norm(v - wi, axis=1) / sensor.retro[3]).astype(int)
+    keep = (ring < sensor.retro_rings) & (v[:, 2] > 0)
+    ring, f, cos = ring[keep], single(np.broadcast_to(wi, v[keep].shape), v[keep]), v[keep, 2]
+    weight = np.bincount(ring, weights=cos)
+    mean = np.bincount(ring, weights=f * cos) / weight
+    stderr = np.sqrt(np.bincount(ring, weights=(cos * (f - mean[ring])) ** 2)) / weight
+    assert np.all(np.abs(averages - mean) < 4 * stderr), (averages - mean) / stderr
+
+
+def test_a_fit_on_the_retro_rings_finds_the_albedo(medium, capsys):
+    path, spec = medium
+    result = run_json(capsys, "fit", path, "--model", spec, "--free", "albedo", "--order", "1", "--retro")
+    value, error = result["fit"]["albedo"]["value"], result["fit"]["albedo"]["stderr"]
+    assert abs(value - ALBEDO) < 3 * error and error < 0.02, result["fit"]
+    assert result["on"] == "retro" and result["overall"]["consistent"]
+
+
+def test_the_text_report_has_no_albedo_rows(medium, capsys):
+    path, spec = medium
+    for flag, unit in (("--points", "point"), ("--retro", "ring")):
+        assert main(["compare", str(path), "--model", spec, "--order", "1", flag]) == 0
+        lines = capsys.readouterr().out.splitlines()
+        assert "no albedo rows" in lines[0] and f"chi2/{unit}" in lines[1] and "albedo" not in lines[1]
+        assert len(lines) == 2 + 2 + 1 and lines[-1].split()[0] == "overall"
+        assert all(line.split()[-1] == "consistent" for line in lines[2:])
+
+
+# ------------------------------------------------------------------------------- a plane: exact points
+
+
+def test_a_plane_s_points_are_exact(plane):
+    table = tables.load(plane)
+    right = compare.compare_points(table, "lambert", albedo=0.5).as_dict()["overall"]
+    assert right["consistent"] and right["points_without_spread"] == right["points_compared"] == 9
+    assert math.isnan(right["chi2_per_point"])  # no point with spread: nothing for chi-square
+    off = compare.compare_points(table, "lambert", albedo=0.5 * (1 + 1e-7)).as_dict()["overall"]
+    assert not off["consistent"] and off["max_abs_z"] > 1
+    from microsim import fit
+
+    value, error = fit.fit(table, "lambert", ["albedo"], on="points").free["albedo"]
+    assert value == pytest.approx(0.5, rel=1e-9) and error < 1e-8
+
+
+# ------------------------------------------------------------------------------- bad input
+
+
+@pytest.mark.parametrize("command", ["compare", "fit"])
+@pytest.mark.parametrize("table, argv, words", [
+    ("cells_only", ["--points"], ["--points", "brdf_points", "directions_deg"]),
+    ("cells_only", ["--retro"], ["--retro", "brdf_retro", "retro_rings"]),
+    ("medium", ["--points", "--retro"], ["--points", "--retro"]),
+    ("medium", ["--points", "--order", "1+2"], ["--order 1+2", "--points"]),
+    ("medium", ["--retro", "--order", "1+2"], ["--order 1+2", "--retro"]),
+    ("medium", ["--points", "--order", "1-base"], ["--order 1-base", "--points"]),
+    ("medium", ["--retro", "--plot", "figures"], ["--plot", "--retro"]),
+])
+def test_bad_input_gives_one_line_and_exit_2(request, tmp_path, capsys, command, table, argv, words):
+    path = request.getfixturevalue(table)
+    path = path[0] if isinstance(path, tuple) else path
+    free = ["--free", "albedo"] if command == "fit" else []
+    argv = [str(tmp_path / a) if a == "figures" else a for a in argv]
+    assert main([command, str(path), "--model", "lambert", "--param", "albedo=0.5", *free, *argv]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and all(w in lines[0] for w in words), captured.err
+    assert "Traceback" not in captured.err and captured.out == "" and not (tmp_path / "figures").exists()
