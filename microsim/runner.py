@@ -161,20 +161,34 @@ def resolve_backend(requested: str, check: bool = True) -> tuple[str, list[str]]
 
 @dataclass
 class Estimate:
-    """Running sums over batches of per-batch estimates: mean and standard error of the mean."""
+    """Running sums over batches of per-batch estimates: mean and standard error of the mean;
+    with ``products``, also the covariance of the mean over the last axis (estimates that share
+    their paths, as the points of next-event estimation do)."""
 
     total: np.ndarray
     squares: np.ndarray
     count: int = 0
+    products: np.ndarray | None = None  # sums of value[..., :, None] * value[..., None, :]
 
     @classmethod
-    def zeros(cls, shape) -> "Estimate":
-        return cls(np.zeros(shape), np.zeros(shape))
+    def zeros(cls, shape, covariance: bool = False) -> "Estimate":
+        products = np.zeros((*shape, shape[-1])) if covariance else None
+        return cls(np.zeros(shape), np.zeros(shape), products=products)
 
     def add(self, value) -> None:
         self.total += value
         self.squares += np.square(value)
+        if self.products is not None:
+            self.products += value[..., :, None] * value[..., None, :]
         self.count += 1
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """Covariance of the mean over the last axis (..., n, n), from the spread of the batches
+        (its diagonal is stderr squared); needs ``products``."""
+        n = self.count
+        spread = (self.products - self.total[..., :, None] * self.total[..., None, :] / n) / (n - 1)
+        return spread / n
 
     @property
     def mean(self) -> np.ndarray:
@@ -260,7 +274,8 @@ class _Reducer:
                 estimates = estimator.reduce(fields, tally.paths, i)
                 for name, value in estimates.items():
                     if name not in res.estimates:
-                        res.estimates[name] = [Estimate.zeros(value.shape) for _ in self.plan.theta_i]
+                        covariant = name in estimator.COVARIANT
+                        res.estimates[name] = [Estimate.zeros(value.shape, covariant) for _ in self.plan.theta_i]
                     res.estimates[name][i].add(value)
                 exited += estimator.exited(estimates)
             lost = energy[j] / tally.paths

@@ -339,8 +339,10 @@ def _check_values(arrays: dict, sensor: Sensor) -> None:
 
 def _never_negative(name: str) -> bool:
     """Datasets a run never makes negative: standard errors, BRDF values, albedos, energies
-    (the balance included), the sensor's solid angles and the event counts."""
+    (the balance included), the sensor's solid angles and the event counts (not covariances)."""
     leaf = name.rsplit("/", 1)[-1]
+    if name.endswith("_covariance"):
+        return False
     return (name.endswith("_stderr") or leaf.startswith(("brdf", "albedo")) or name.startswith("energy/")
             or leaf in ("solid_angle", "projected_solid_angle") or name.startswith("diagnostics/"))
 

@@ -297,3 +297,21 @@ def test_the_table_names_the_delta_lobes_it_leaves_out(tmp_path):
     assert table.attrs["points_delta_lobes"] == ("material (mirror): its mirror reflection; base (interfaced_lambert): "
                                                  "the mirror reflection of its smooth interface")
     assert table.arrays["brdf_points"][0, 0] > 0
+
+
+def test_the_table_keeps_the_covariance_of_its_points(tmp_path):
+    """brdf_points_covariance is the covariance of the realizations' estimates over their
+    number (the points share paths: strongly correlated in the medium), its diagonal the
+    squared standard errors; the realizations traced one by one give the same."""
+    cfg = medium_config("lambert_sphere", 0, 40_000, 8)
+    table = tables.load(session.run(cfg, tmp_path / "covariance.h5").tables[0])
+    _, est = per_realization(cfg)
+    for name, values in (("brdf_points", est["brdf_points"][:, :, ORDERS]),
+                         ("brdf_points_order", est["brdf_points"][:, :, :ORDERS])):
+        covariance = table.arrays[f"{name}_covariance"]
+        expected = np.stack([[np.cov(values[:, i, k], rowvar=False) for k in range(values.shape[2])]
+                             if values.ndim == 4 else np.cov(values[:, i], rowvar=False)
+                             for i in range(values.shape[1])]) / len(values)
+        np.testing.assert_allclose(covariance, expected, rtol=1e-9, atol=1e-15)
+        np.testing.assert_allclose(np.sqrt(np.diagonal(covariance, axis1=-2, axis2=-1)),
+                                   table.arrays[f"{name}_stderr"], rtol=1e-9)

@@ -48,6 +48,9 @@ class Estimator:
     DATASETS: ClassVar[tuple] = ()
     #: the attributes of the table's root it writes (microsim.table_layout.Attribute)
     ATTRIBUTES: ClassVar[tuple] = ()
+    #: the names of :meth:`reduce` whose estimates share their paths along the last axis: the
+    #: reducer keeps their covariance too (microsim.runner.Estimate.covariance)
+    COVARIANT: ClassVar[tuple] = ()
 
     def __init__(self, sensor, plan=None):
         self.sensor, self.plan = sensor, plan

@@ -19,7 +19,8 @@ counts w e (c_j / c_max)^k, as an exit of order k does (:class:`microsim.tally.T
 
 The points are the sensor's (:mod:`microsim.sensor`: ``[sensor] directions_deg`` and
 ``retro_points_deg``), turned toward each incidence. Datasets: ``brdf_points`` and
-``brdf_points_order`` with their standard errors (the spread of the realizations), and the
+``brdf_points_order`` with their standard errors and, since the points of an incidence share
+their paths, the covariance of their errors (both from the spread of the realizations), and the
 points' angles and unit vectors per incidence.
 """
 
@@ -63,6 +64,13 @@ class Points(Estimator):
             Dataset(f"{name}_stderr", axes, "1/sr", f"standard error of {name}, from the spread of the realizations",
                     when="sensor.directions_deg or sensor.retro_points_deg"),
         )
+    ) + (
+        Dataset("brdf_points_covariance", ("incidences", "points", "points"), "1/sr^2", "covariance of the errors "
+                "of brdf_points between the points of each incidence (they share their paths), from the spread "
+                "of the realizations; its diagonal is brdf_points_stderr squared",
+                when="sensor.directions_deg or sensor.retro_points_deg"),
+        Dataset("brdf_points_order_covariance", ("incidences", "orders", "points", "points"), "1/sr^2",
+                "brdf_points_covariance of each order", when="sensor.directions_deg or sensor.retro_points_deg"),
     ) + tuple(
         Dataset(f"sensor/points_{name}", axes, unit, doc, when="sensor.directions_deg or sensor.retro_points_deg")
         for name, axes, unit, doc in (
@@ -82,6 +90,8 @@ class Points(Estimator):
                   when="sensor.directions_deg or sensor.retro_points_deg"),
     )
 
+    COVARIANT = ("brdf_points",)
+
     @classmethod
     def wanted(cls, config) -> bool:
         return config.sensor.n_points > 0
@@ -95,7 +105,7 @@ class Points(Estimator):
         return {"brdf_points": rows / self.directions[incidence][:, 2]}
 
     def estimate_values(self):
-        return (ORDERS + 1) * self.sensor.n_points
+        return (ORDERS + 1) * self.sensor.n_points * (self.sensor.n_points + 2)  # sums, squares, products
 
     @functools.cached_property
     def directions(self) -> list[np.ndarray]:
@@ -115,6 +125,7 @@ class Points(Estimator):
         for suffix, row in (("", ORDERS), ("_order", slice(0, ORDERS))):
             put(f"brdf_points{suffix}", np.stack([e.mean[row] for e in estimates["brdf_points"]]))
             put(f"brdf_points{suffix}_stderr", np.stack([e.stderr[row] for e in estimates["brdf_points"]]))
+            put(f"brdf_points{suffix}_covariance", np.stack([e.covariance[row] for e in estimates["brdf_points"]]))
 
     def attributes(self) -> dict:
         config = self.plan.config
