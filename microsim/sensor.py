@@ -131,9 +131,7 @@ class Sensor(NamedTuple):
         as :meth:`toward` takes it."""
         spec = self.point_spec if spec is None else spec
         wi = np.asarray(wi, np.float64)
-        theta_i = math.acos(min(max(float(wi[2]), -1.0), 1.0))
-        if phi_i is None:
-            phi_i = math.atan2(wi[1], wi[0]) if wi[0] or wi[1] else 0.0
+        theta_i, phi_i = math.acos(min(max(float(wi[2]), -1.0), 1.0)), _azimuth(wi, phi_i)
         theta, phi = spec[:, 1].copy(), phi_i + spec[:, 2]
         retro = spec[:, 0] == RETRO_POINT
         turned = theta_i - spec[retro, 1]  # negative: past the normal, on the specular side
@@ -145,9 +143,7 @@ class Sensor(NamedTuple):
         the incidence wi, radians."""
         w = self.point_directions(wi, phi_i)
         wi = np.asarray(wi, np.float64)
-        if phi_i is None:
-            phi_i = math.atan2(wi[1], wi[0]) if wi[0] or wi[1] else 0.0
-        relative = np.remainder(np.arctan2(w[:, 1], w[:, 0]) - phi_i, 2.0 * math.pi)
+        relative = np.remainder(np.arctan2(w[:, 1], w[:, 0]) - _azimuth(wi, phi_i), 2.0 * math.pi)
         relative[relative > 2.0 * math.pi - 1e-12] = 0.0  # -0 by rounding
         relative[(w[:, 0] == 0.0) & (w[:, 1] == 0.0)] = 0.0
         gamma = 2.0 * np.arcsin(np.clip(np.linalg.norm(w - wi, axis=1) / 2.0, 0.0, 1.0))
@@ -303,6 +299,13 @@ class Sensor(NamedTuple):
         w, weight = self.cell_quadrature(n_theta, n_phi)
         values = func(w.reshape(-1, 3)).reshape(weight.shape)
         return np.sum(values * weight, axis=1)
+
+
+def _azimuth(wi: np.ndarray, phi_i: float | None) -> float:
+    """The incidence's azimuth: ``phi_i`` if given, else wi's own (0 where wi is the normal)."""
+    if phi_i is not None:
+        return float(phi_i)
+    return math.atan2(wi[1], wi[0]) if wi[0] or wi[1] else 0.0
 
 
 _INV_TWO_PI = 0.5 / math.pi

@@ -229,10 +229,18 @@ def test_points_are_reciprocal_at_exact_directions(scene, tmp_path):
     for a, (theta_a, phi_a) in enumerate(incidences):
         for k, (theta, relative) in enumerate(cfg["sensor"]["directions_deg"]):
             point_of[a, index[theta, (phi_a + relative) % 360.0]] = k
-    z = [abs(value[a, point_of[a, b]] - value[b, point_of[b, a]]) / math.hypot(stderr[a, point_of[a, b]],
-                                                                                 stderr[b, point_of[b, a]])
-         for a in range(len(incidences)) for b in range(a + 1, len(incidences))]
-    assert len(z) == 28 and max(z) < 4.5, f"{scene}: worst reciprocity z {max(z):.2f}"
+    mu_o = np.cos(np.radians([theta for theta, _ in cfg["sensor"]["directions_deg"]]))
+
+    def worst_z(weight):  # of weight(point) x f: 1 is reciprocal; mu_o is not (the test's power)
+        return max(abs(weight[point_of[a, b]] * value[a, point_of[a, b]]
+                       - weight[point_of[b, a]] * value[b, point_of[b, a]])
+                   / math.hypot(weight[point_of[a, b]] * stderr[a, point_of[a, b]],
+                                weight[point_of[b, a]] * stderr[b, point_of[b, a]])
+                   for a in range(len(incidences)) for b in range(a + 1, len(incidences)))
+
+    assert len(point_of) == 64
+    assert worst_z(np.ones_like(mu_o)) < 4.5, f"{scene}: worst reciprocity z {worst_z(np.ones_like(mu_o)):.2f}"
+    assert worst_z(mu_o) > 4.5  # f cos(theta_o) is not reciprocal, and the table shows it
 
 
 # ------------------------------------------------------------------- backends and bad input
