@@ -292,25 +292,39 @@ def _print_points(result, title) -> None:
 
     unit, _, count, _ = compare_module.ON[result.on]
     rows = result.as_dict()
-    if result.on == "points":
+    hotelling = rows.get("points_statistic") == "hotelling"
+    level = f"{100 * (1 - compare_module.CHI2_OUTSIDE):g} % two-sided"
+    if hotelling:
+        what = ("points: the model at each exact direction (next-event estimation); per incidence Hotelling's F of "
+                f"the points with the covariance of their errors, {level} bounds (an incidence with too few "
+                "realizations: chi^2 per point, bounds of 1 degree of freedom); overall: every incidence at the "
+                "Bonferroni level")
+    elif result.on == "points":
         what = ("points: the model at each exact direction (next-event estimation), every point but where both are "
                 f"0; exact points (no spread) must match to {compare_module.EXACT_POINT:g}; chi^2 per point: 1 "
-                "expected for the model of the table, bounds of 1 degree of freedom (the points' errors are "
-                "correlated)")
+                "expected for the model of the table, bounds of 1 degree of freedom (the table holds no covariance "
+                f"of the points' errors), {level}")
     else:
         what = (f"retro rings with signal: table > {compare_module.SIGNAL_TO_NOISE:g} standard errors; chi^2 per "
-                "ring: 1 expected for the model of the table")
-    click.echo(f"{title} (order {result.order}; {what}, {100 * (1 - compare_module.CHI2_OUTSIDE):g} % two-sided; "
-               f"consistent: within them; no albedo rows: the albedo sums the cells, not the {unit}s)")
+                f"ring: 1 expected for the model of the table, {level}")
+    click.echo(f"{title} (order {result.order}; {what}; no albedo rows: the albedo sums the cells, not the {unit}s)")
+    statistic = "F or chi2" if hotelling else f"chi2/{unit}"
     click.echo(f"{'theta_i':>8} {'phi_i':>6} {unit + 's':>6} {'med|rel|':>9} {'rel rmse':>9} {'max|z|':>9} "
-               f"{'chi2/' + unit:>10} {'bounds':>18}  verdict")
+               f"{statistic:>10} {'bounds':>18}{' p-value' if hotelling else ''}  verdict")
     for row in [*rows["per_incidence"], rows["overall"]]:
         where = (f"{row['theta_i_deg']:8.1f} {row['phi_i_deg']:6.1f}" if "theta_i_deg" in row
                  else f"{'overall':>8} {'':>6}")
-        low, high = row["chi2_bounds"]
+        value, (low, high) = row[f"chi2_per_{unit}"], row["chi2_bounds"]
+        if "hotelling_f" in row:
+            value, (low, high) = row["hotelling_f"], row["hotelling_bounds"]
+        p = ""
+        if hotelling:
+            p = f" {row['p_value']:8.2g}" if "p_value" in row else f" {row.get('p_value_min', float('nan')):8.2g}"
+        shown, bounds = f"{value:10.3g}", f"[{low:.3g}, {high:.3g}]"
+        if hotelling and "theta_i_deg" not in row:  # overall: the smallest p against Bonferroni's level
+            shown, bounds = f"{'':>10}", f"p >= {row['bonferroni_level']:.3g}"
         click.echo(f"{where} {row[count]:6d} {row['median_abs_rel_err']:9.4f} {row['rel_rmse']:9.4f} "
-                   f"{row['max_abs_z']:9.3g} {row[f'chi2_per_{unit}']:10.3f} {f'[{low:.3g}, {high:.3g}]':>18}  "
-                   f"{VERDICTS[row['consistent']]}")
+                   f"{row['max_abs_z']:9.3g} {shown} {bounds:>18}{p}  {VERDICTS[row['consistent']]}")
     if rows.get("points_delta_lobes"):
         click.echo(f"not in the points (delta lobes next-event estimation does not see): {rows['points_delta_lobes']}")
 
