@@ -323,3 +323,22 @@ def test_the_table_keeps_the_covariance_of_its_points(tmp_path):
         np.testing.assert_allclose(covariance, expected, rtol=1e-9, atol=1e-15)
         np.testing.assert_allclose(np.sqrt(np.diagonal(covariance, axis1=-2, axis2=-1)),
                                    table.arrays[f"{name}_stderr"], rtol=1e-9)
+
+
+def test_every_albedo_of_a_list_has_the_points_of_its_own_run(tmp_path):
+    """An albedo list traces at the largest and scales each event of order k by (c_j / c_max)^k,
+    as exits are: the largest albedo's points are the single run's bit for bit, and a smaller
+    one's equal its own run within 4.5 combined standard errors at every point (all orders of
+    the Lambert-sphere medium: the scaling reaches high orders)."""
+    cfg = medium_config("lambert_sphere", 0, 64_000, 16)
+    joint = session.run({**cfg, "material": {"kind": "lambert", "albedo": [0.5, 0.9]}}, tmp_path / "joint.h5")
+    for albedo, path in zip((0.5, 0.9), joint.tables):
+        alone = tables.load(session.run({**cfg, "material": {"kind": "lambert", "albedo": albedo}},
+                                        tmp_path / f"alone{albedo}.h5").tables[0])
+        together = tables.load(path)
+        a, b = (t.arrays["brdf_points_order"] for t in (alone, together))
+        if albedo == 0.9:
+            assert np.array_equal(a, b)
+        else:
+            se = np.hypot(alone.arrays["brdf_points_order_stderr"], together.arrays["brdf_points_order_stderr"])
+            assert np.all(np.abs(a - b) < 4.5 * se + 1e-300) and b[:, 3].min() > 0
