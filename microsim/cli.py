@@ -12,6 +12,7 @@ Ctrl-C as it should). A signal that was ignored when microsim started stays igno
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import signal
 import sys
@@ -37,15 +38,21 @@ class BadInput(click.ClickException):
 
 
 def on_points_or_rings(command):
-    """The --points and --retro flags of compare and fit (what they compare or fit instead of the cells)."""
-    command = click.option("--retro", "on_retro", is_flag=True,
+    """The --points and --retro flags of compare and fit (what they compare or fit instead of the
+    cells), handed to ``command`` as one argument ``on``: "cells", "points" or "retro" (:func:`_on`)."""
+
+    @functools.wraps(command)
+    def with_on(*args, on_points, on_retro, **kwargs):
+        return command(*args, on=_on(on_points, on_retro, kwargs["plot_dir"]), **kwargs)
+
+    flagged = click.option("--retro", "on_retro", is_flag=True,
                            help="instead of the cells, the table's retro rings (sensor.retro_rings): the model "
                                 "averaged over each ring, cos-weighted, against brdf_retro, each ring judged as a "
-                                "cell; no albedo, not with --points")(command)
+                                "cell; no albedo, not with --points")(with_on)
     return click.option("--points", "on_points", is_flag=True,
                         help="instead of the cells, the table's points (sensor.directions_deg, "
                              "sensor.retro_points_deg): the model at each exact direction against brdf_points "
-                             "(next-event estimation), nothing averaged; no albedo, not with --retro")(command)
+                             "(next-event estimation), nothing averaged; no albedo, not with --retro")(flagged)
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -104,13 +111,12 @@ def run(config_path, **flags):
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object")
 @click.option("--plot", "plot_dir", type=click.Path(file_okay=False, path_type=Path),
               help="write PNG figures (polar maps, plane of incidence) into this directory (cells only)")
-def compare(table_path, model_name, params, order, on_points, on_retro, as_json, plot_dir):
+def compare(table_path, model_name, params, order, on, as_json, plot_dir):
     """Average a model over the cells of TABLE.h5 (or take it at the table's points, or average it
     over its retro rings) and report how far it is from the simulation."""
     from . import compare as compare_module
 
     values = _model_parameters(params)
-    on = _on(on_points, on_retro, plot_dir)
     _check_plot_dir(plot_dir)
     cls = _model_class(model_name)
     with _user_model_errors(model_name):
@@ -139,7 +145,7 @@ def compare(table_path, model_name, params, order, on_points, on_retro, as_json,
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object: compare's, with a key fit")
 @click.option("--plot", "plot_dir", type=click.Path(file_okay=False, path_type=Path),
               help="write PNG figures of the best fit into this directory (cells only)")
-def fit(table_path, model_name, free, params, order, on_points, on_retro, as_json, plot_dir):
+def fit(table_path, model_name, free, params, order, on, as_json, plot_dir):
     """Fit model parameters to TABLE.h5 (weighted least squares on cell averages, or at its points,
     or on its retro rings); report them with standard errors, chi-square per degree of freedom
     and compare's figures for the best fit."""
@@ -148,7 +154,6 @@ def fit(table_path, model_name, free, params, order, on_points, on_retro, as_jso
 
     cls = _model_class(model_name)
     values = _model_parameters(params)
-    on = _on(on_points, on_retro, plot_dir)
     _check_plot_dir(plot_dir)
     table = _load_table(table_path)
     with _user_model_errors(model_name), fit_status(cls.name) as status:
