@@ -437,7 +437,7 @@ def compare(table, model, order: str = "all", **params) -> Comparison:
                       signal, modelled @ p, albedo_sim, albedo_se, worst,
                       *predicted_variance(modelled, sim, stderr, signal, p,
                                           realization_scale(sim, stderr, albedo_sim, albedo_se, p, table.paths,
-                                                            _realizations(table))))
+                                                            realizations(table))))
 
 
 def compare_points(table, model, order: str = "all", **params) -> PointComparison:
@@ -459,20 +459,20 @@ def compare_points(table, model, order: str = "all", **params) -> PointCompariso
     exact = judged & (stderr <= EXACT_POINT * size)
     error = np.where(exact, EXACT_POINT * size, stderr)
     z = np.divide(sim - modelled, error, out=np.zeros_like(sim), where=judged)
-    realizations = _realizations(table)
+    count = realizations(table)
     noisy = judged & ~exact
-    terms = np.where(noisy, normal_squares(z, realizations), 0.0)
+    terms = np.where(noisy, normal_squares(z, count), 0.0)
     covariance = points_covariance(table, order)
     # with the covariance, Hotelling's test of each incidence; without, the bounds of one error
     # common to every point (module doc)
     tests = None if covariance is None else [
-        hotelling((sim - modelled)[i, n], covariance[i][np.ix_(n, n)], realizations, sim[i, n],
+        hotelling((sim - modelled)[i, n], covariance[i][np.ix_(n, n)], count, sim[i, n],
                   EXACT_POINT * float(np.linalg.norm(size[i, n]))) if n.any() else None
         for i, n in enumerate(noisy)]
     return PointComparison(model.name, dict(model.values), order, "points", table.theta_i, table.phi_i, modelled,
                            sim, stderr, judged, exact, z, terms, np.zeros_like(sim), np.ones_like(sim), 0.0,
                            {"points_delta_lobes": str(table.attrs.get("points_delta_lobes", ""))}, tests,
-                           realizations)
+                           count)
 
 
 def compare_retro(table, model, order: str = "all", **params) -> PointComparison:
@@ -493,7 +493,7 @@ def compare_retro(table, model, order: str = "all", **params) -> PointComparison
     _require_finite(modelled, f"model {model!r}", "retro rings")
     _, cells, cells_stderr, albedo, albedo_stderr = selection(table, order)
     p = table.projected_solid_angle
-    scale = realization_scale(cells, cells_stderr, albedo, albedo_stderr, p, table.paths, _realizations(table))
+    scale = realization_scale(cells, cells_stderr, albedo, albedo_stderr, p, table.paths, realizations(table))
     variance, kurtosis, common = predicted_variance(modelled, cells, cells_stderr, with_signal(cells, cells_stderr),
                                                     p, scale, at=projected)
     # a ring the horizon cuts entirely has no value and no variance; nor has one of an incidence
@@ -635,7 +635,7 @@ def repeated_points(directions: np.ndarray) -> np.ndarray:
     return np.any((gap < 1e-12) & earlier, axis=2)
 
 
-def _realizations(table) -> int:
+def realizations(table) -> int:
     """The realizations a table's standard errors come from."""
     return int(table.attrs.get("realizations", 2))
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 import tomllib
 import types
 import typing
@@ -27,6 +28,11 @@ from .choices import BACKEND_CHOICES
 from .materials import MATERIALS
 from .sensor import MAX_POINTS
 from .schema import Section
+
+
+def _is_number(value) -> bool:
+    """A real number, of Python or numpy, not a bool."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
 class ConfigError(ValueError):
@@ -91,11 +97,11 @@ class SensorSection(Section):
     def _directions(cls, value):
         """A list of [theta_o, phi_o] pairs of numbers, theta_o in [0, 90), phi_o in [-360, 360]."""
         accepted = "accepted: a list of [theta_o, phi_o] pairs, theta_o in [0, 90) and phi_o in [-360, 360] deg"
-        if not isinstance(value, list):
+        value = value.tolist() if hasattr(value, "tolist") else value  # a numpy array from Python
+        if not isinstance(value, (list, tuple)):
             raise ValueError(f"directions_deg = {excerpt(value)}: not a list; {accepted}")
         for k, pair in enumerate(value):
-            if (not isinstance(pair, list) or len(pair) != 2
-                    or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in pair)):
+            if not isinstance(pair, (list, tuple)) or len(pair) != 2 or not all(map(_is_number, pair)):
                 raise ValueError(f"directions_deg[{k}] = {excerpt(pair)}: not a pair of numbers; {accepted}")
             theta, phi = pair
             if not 0.0 <= theta < 90.0:
@@ -110,7 +116,8 @@ class SensorSection(Section):
     def _retro_points(cls, value):
         """A list of numbers in [0, 90)."""
         accepted = "accepted: a list of phase angles in [0, 90) deg"
-        if not isinstance(value, list) or any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value):
+        value = value.tolist() if hasattr(value, "tolist") else value  # a numpy array from Python
+        if not isinstance(value, (list, tuple)) or not all(map(_is_number, value)):
             raise ValueError(f"retro_points_deg = {excerpt(value)}: not a list of numbers; {accepted}")
         for k, gamma in enumerate(value):
             if not 0.0 <= gamma < 90.0:

@@ -253,7 +253,7 @@ def _cells(table, first, order: str, n_free: int) -> _Fitted:
     incidence = np.nonzero(fitted)[0]  # the incidence of each fitted cell
     dispersion, floor = table_noise.variance_model(sim, stderr, signal, table.projected_solid_angle)
     scale = table_noise.realization_scale(sim, stderr, albedo, albedo_stderr, table.projected_solid_angle,
-                                          table.paths, int(table.attrs["realizations"]))
+                                          table.paths, compare.realizations(table))
     return _Fitted(sim[fitted], stderr[fitted], incidence,
                    lambda model: np.concatenate([rule.averages(model)[fitted[i]] for i, rule in enumerate(rules)]),
                    (dispersion[:, None] / table.projected_solid_angle)[fitted], floor[incidence], scale)
@@ -277,7 +277,7 @@ def _rings(table, first, order: str, n_free: int) -> _Fitted:
     incidence = np.nonzero(fitted)[0]
     dispersion, floor = table_noise.variance_model(cells, cells_stderr, cells_signal, table.projected_solid_angle)
     scale = table_noise.realization_scale(cells, cells_stderr, albedo, albedo_stderr, table.projected_solid_angle,
-                                          table.paths, int(table.attrs["realizations"]))
+                                          table.paths, compare.realizations(table))
     return _Fitted(sim[fitted], stderr[fitted], incidence,
                    lambda model: np.concatenate([rule.averages(model)[fitted[i]] for i, rule in enumerate(rules)]),
                    dispersion[incidence] / projected[fitted], floor[incidence], scale)
@@ -308,7 +308,7 @@ def _whitening(table, order, sim, stderr, fitted, n_free):
     covariance, or where an incidence has as many points with spread as realizations or more, or
     too many for the estimated weights (c <= 0)."""
     covariance = compare.points_covariance(table, order)
-    realizations = compare._realizations(table)
+    realizations = compare.realizations(table)
     bounding = ("each point weighed by its own standard error; parameter errors that hold whatever the "
                 "correlation")
     if covariance is None:

@@ -163,12 +163,15 @@ def resolve_backend(requested: str, check: bool = True) -> tuple[str, list[str]]
 class Estimate:
     """Running sums over batches of per-batch estimates: mean and standard error of the mean;
     with ``products``, also the covariance of the mean over the last axis (estimates that share
-    their paths, as the points of next-event estimation do)."""
+    their paths, as the points of next-event estimation do). Those sums are of the deviations
+    from the first batch (``shift``), so that batches of equal values (a Lambertian plane's
+    points) have no spread at all, not the rounding of large sums that cancel."""
 
     total: np.ndarray
     squares: np.ndarray
     count: int = 0
     products: np.ndarray | None = None  # sums of value[..., :, None] * value[..., None, :]
+    shift: np.ndarray | None = None  # with products: the first batch, which the sums are taken from
 
     @classmethod
     def zeros(cls, shape, covariance: bool = False) -> "Estimate":
@@ -176,10 +179,13 @@ class Estimate:
         return cls(np.zeros(shape), np.zeros(shape), products=products)
 
     def add(self, value) -> None:
+        if self.products is not None:
+            if self.shift is None:
+                self.shift = np.array(value, np.float64)
+            value = value - self.shift
+            self.products += value[..., :, None] * value[..., None, :]
         self.total += value
         self.squares += np.square(value)
-        if self.products is not None:
-            self.products += value[..., :, None] * value[..., None, :]
         self.count += 1
 
     @property
@@ -192,7 +198,7 @@ class Estimate:
 
     @property
     def mean(self) -> np.ndarray:
-        return self.total / self.count
+        return self.total / self.count if self.shift is None else self.shift + self.total / self.count
 
     @property
     def stderr(self) -> np.ndarray:

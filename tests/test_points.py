@@ -71,7 +71,7 @@ def test_a_lambertian_plane_is_albedo_over_pi_at_every_point_with_zero_spread(tm
            "illumination": {"theta_i_deg": [0.0, 40.0, 85.0, 20.0], "phi_i_deg": [0.0, 30.0, 200.0, 90.0]},
            "sensor": {"cells": 50, "directions_deg": [[0, 0], [30, 45], [60, 180], [89, 270], [75, -120]],
                       "retro_points_deg": [0.0, 3.0, 60.0]},
-           "run": {"paths": 20_000, "realizations": 4}}
+           "run": {"paths": 64_000}}  # 32 realizations: equal values summed 32 times
     outcome = session.run(cfg, tmp_path / "plane.h5")
     for albedo, path in zip((0.35, 0.8), outcome.tables):
         table = tables.load(path)
@@ -80,7 +80,7 @@ def test_a_lambertian_plane_is_albedo_over_pi_at_every_point_with_zero_spread(tm
         np.testing.assert_allclose(points, albedo / math.pi, rtol=1e-12)
         np.testing.assert_allclose(order[:, 0], albedo / math.pi, rtol=1e-12)
         assert not order[:, 1:].any()
-        assert table.arrays["brdf_points_stderr"].max() < 1e-12 * albedo
+        assert not table.arrays["brdf_points_stderr"].any() and not table.arrays["brdf_points_covariance"].any()
         assert table.attrs["points_delta_lobes"] == ""
 
 

@@ -27,6 +27,7 @@ points' angles and unit vectors per incidence.
 from __future__ import annotations
 
 import functools
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -105,7 +106,10 @@ class Points(Estimator):
         return {"brdf_points": rows / self.directions[incidence][:, 2]}
 
     def estimate_values(self):
-        return (ORDERS + 1) * self.sensor.n_points * (self.sensor.n_points + 2)  # sums, squares, products
+        # the reducer keeps three numbers a value (memory_estimate); the covariance's products
+        # add n_points more, counted here in thirds
+        values = (ORDERS + 1) * self.sensor.n_points
+        return math.ceil(values * (3 + self.sensor.n_points) / 3)
 
     @functools.cached_property
     def directions(self) -> list[np.ndarray]:

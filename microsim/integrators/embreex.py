@@ -46,7 +46,8 @@ SHADOW_BYTES = 60
 class ShadowQueue(NamedTuple):
     """Shadow rays waiting for Embree: their segments (as :class:`~.records.Rays`), their payloads
     (amount, point, order: :func:`microsim.estimators.points.on_interaction`), the tile sides each
-    has wrapped at, and how many are queued (``count[0]``)."""
+    has wrapped at, and how many are queued (``count[0]``). A pass queues at most a ray a point
+    for each path of the batch (one interaction a path), so rows x points never overflow."""
 
     rays: object
     amount: np.ndarray
@@ -82,6 +83,8 @@ def queue_shadow_ray(world, work, i, state, wo, payload):
     if wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2] <= 0.0 or wo[2] <= 0.0:
         return 0.0
     j = queue.count[0]
+    if j >= len(queue.amount):  # a pass has one interaction a path and a path k points at most
+        raise IndexError("the shadow queue is full")
     queue.count[0] = j + 1
     prepare_segment(queue.rays, j, wrap_point(p, n, clearance(p, scene.shape_size[s]), scene.tile), wo, scene)
     queue.amount[j], queue.point[j], queue.order[j] = payload
