@@ -367,13 +367,13 @@ def compile_tracer(plan: Plan, sensor: Sensor | None = None) -> None:
     stream_key(plan.config.run.seed, 0, 0)  # each unit's random stream
 
 
-def trace_realizations(config) -> tuple[Plan, dict[str, np.ndarray]]:
-    """Trace a validated config of one albedo in this process, unit by unit, and keep every
-    realization's estimates instead of their mean: (plan, {estimate name: array (realizations,
-    incidences, ...)}), the names of the estimators' ``reduce``. For statistics a table's mean and
-    standard error do not give: the covariance of estimates that share paths, jackknife errors
-    of a function of them."""
-    plan = Plan.from_config(config)
+def trace_realizations(config, workers: int = 1) -> tuple[Plan, dict[str, np.ndarray]]:
+    """Trace a validated config of one albedo on the local executor (``workers`` processes) and
+    keep every realization's estimates instead of their mean: (plan, {estimate name: array
+    (realizations, incidences, ...)}), the names of the estimators' ``reduce``. For statistics a
+    table's mean and standard error do not give: the covariance of estimates that share paths,
+    jackknife errors of a function of them."""
+    plan = Plan.from_config(config, workers=workers)
     if plan.albedos:
         raise PlanError(f"material.albedo = {list(plan.albedos)}: trace_realizations takes a config of one albedo")
     sensor = plan.build_sensor()
@@ -388,7 +388,7 @@ def trace_realizations(config) -> tuple[Plan, dict[str, np.ndarray]]:
             for name, value in estimator.reduce(fields, tally.paths, i).items():
                 out.setdefault(name, np.zeros((plan.realizations, plan.n_incidences, *value.shape)))[r, i] = value
 
-    executors.trace_units(plan, plan.units, keep)
+    EXECUTORS["local"](plan, plan.units, keep, workers)
     return plan, out
 
 

@@ -113,7 +113,7 @@ def medium_config(phase: str, max_order: int, paths: int, realizations: int, see
             "run": {"paths": paths, "realizations": realizations, "seed": seed, "max_order": max_order}}
 
 
-@pytest.mark.slow  # 2.4 M paths (runner.trace_realizations: the guard does not see them)
+@pytest.mark.slow  # 2.4 M paths
 def test_the_media_order_1_is_c_p_over_mu_i_plus_mu_o_at_every_point():
     plan, est = per_realization(medium_config("lambert_sphere", 1, 800_000, 40))
     points = est["brdf_points"][:, :, 0]  # order 1: (R, n_i, K)
@@ -127,7 +127,7 @@ def test_the_media_order_1_is_c_p_over_mu_i_plus_mu_o_at_every_point():
     assert not est["brdf_points"][:, :, 1:ORDERS].any()  # max_order = 1: nothing beyond order 1
 
 
-@pytest.mark.slow  # 3.6 M paths (runner.trace_realizations: the guard does not see them)
+@pytest.mark.slow  # 3.6 M paths
 def test_the_isotropic_media_points_are_rte_isotropic_at_every_point():
     plan, est = per_realization(medium_config("isotropic", 0, 1_200_000, 40))
     points = est["brdf_points"][:, :, ORDERS]  # all orders (the row after the four orders)
@@ -142,7 +142,7 @@ def test_the_isotropic_media_points_are_rte_isotropic_at_every_point():
 # ------------------------------------------------------------------------------- V-cavities
 
 
-@pytest.mark.slow  # 1.8 M paths (runner.trace_realizations: the guard does not see them)
+@pytest.mark.slow  # 1.8 M paths
 def test_lambertian_v_cavities_order_1_is_interfaced_lambert_at_eta_1_with_the_v_groove_g():
     cfg = {"scene": {"kind": "vcavities", "distribution": "beckmann", "roughness": 0.6},
            "material": {"kind": "lambert", "albedo": 0.8},
