@@ -1,0 +1,101 @@
+"""The mesh scene (geometry/mesh.py): a user's periodic tile, checked, and traced as every surface.
+
+- A flat two-triangle tile is the plane: the same paths give the plane's cells bit for bit (a
+  Lambertian plane's exits depend only on the random stream: every path meets the plane z = 0
+  once and leaves in the direction it draws).
+- A white Lambertian periodic bumpy tile is closed: every path leaves (albedo 1 to 1e-12,
+  nothing transmitted or truncated) up to 89 deg.
+- Bad meshes are refused in one line naming scene.path, exit 2, nothing written.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+from microsim import session, tables
+
+N = 16  # cells a side of the bumpy tile
+
+
+def bumpy(period: float = 2.0, lift_edge: float = 0.0, flip: bool = False, drop: int = 0):
+    """A periodic sinusoidal tile (vertices, faces): z = 0.3 sin(pi x) cos(pi y) on [0, period]^2;
+    ``lift_edge`` raises the x = 0 side (seams that no longer match), ``flip`` reverses the
+    winding, ``drop`` removes that many faces in the middle (a hole)."""
+    x = np.linspace(0.0, period, N + 1)
+    gx, gy = np.meshgrid(x, x, indexing="ij")
+    gz = 0.3 * np.sin(math.pi * gx) * np.cos(math.pi * gy)
+    gz[0, :] += lift_edge
+    vertices = np.column_stack([gx.ravel(), gy.ravel(), gz.ravel()])
+    faces = []
+    for i in range(N):
+        for j in range(N):
+            a, b = i * (N + 1) + j, (i + 1) * (N + 1) + j
+            faces += [[a, b, b + 1], [a, b + 1, a + 1]]
+    faces = np.array(faces)
+    if drop:  # the faces of cells in the middle of the tile, away from its sides
+        middle = 2 * ((N // 2) * N + N // 2)
+        faces = np.delete(faces, range(middle, middle + drop), axis=0)
+    return vertices, faces[:, ::-1] if flip else faces
+
+
+def write(path, vertices, faces):
+    trimesh.Trimesh(vertices, faces, process=False).export(path)
+    return str(path)
+
+
+def mesh_config(path, albedo=0.8, theta=(0.0, 60.0), **scene) -> dict:
+    return {"scene": {"kind": "mesh", "path": str(path), **scene}, "material": {"kind": "lambert", "albedo": albedo},
+            "illumination": {"theta_i_deg": list(theta)}, "sensor": {"cells": 100},
+            "run": {"paths": 40_000, "realizations": 4, "seed": 3}}
+
+
+def test_a_flat_tile_mesh_is_the_plane_bit_for_bit(tmp_path):
+    path = write(tmp_path / "flat.obj", np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float),
+                 np.array([[0, 1, 2], [0, 2, 3]]))
+    cfg = mesh_config(path, theta=(0.0, 45.0, 85.0))
+    flat = tables.load(session.run(cfg, tmp_path / "mesh.h5").tables[0])
+    plane = tables.load(session.run({**cfg, "scene": {"kind": "plane", "tile": 1.0}}, tmp_path / "plane.h5").tables[0])
+    for name in ("brdf", "brdf_order", "brdf_stderr", "albedo"):
+        assert np.array_equal(flat.arrays[name], plane.arrays[name]), name
+    assert flat.scene["rms_slope"] == 0.0 and flat.scene["mean_cosine"] == 1.0 and flat.scene["period"] == 1.0
+
+
+def test_a_white_closed_tile_returns_every_path(tmp_path):
+    path = write(tmp_path / "bumps.ply", *bumpy())
+    table = tables.load(session.run(mesh_config(path, albedo=1.0, theta=(0.0, 60.0, 89.0)), tmp_path / "w.h5").tables[0])
+    np.testing.assert_allclose(table.albedo, 1.0, rtol=0, atol=1e-12)
+    assert not table.transmitted.any() and not table.truncated.any()
+    area = table.scene["area"]
+    assert table.scene["mean_cosine"] == pytest.approx(4.0 / area, rel=1e-12)  # the tile's area over the mesh's
+    assert table.scene["sha256"] == hashlib.sha256(open(path, "rb").read()).hexdigest()
+    assert table.scene["triangles"] > table.scene["mesh_triangles"] == 2 * N * N  # copies beyond the sides
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda d: str(d / "absent.obj"), "no such file"),
+    (lambda d: write(d / "inverted.ply", *bumpy(flip=True)), "inverted orientation"),
+    (lambda d: write(d / "seams.ply", *bumpy(lift_edge=0.1)), "seams do not match"),
+    (lambda d: write(d / "hole.ply", *bumpy(drop=4)), "add a [base]"),
+    (lambda d: write(d / "nan.obj", np.array([[0, 0, 0], [1, 0, 0], [1, 1, np.nan], [0, 1, 0]]),
+                     np.array([[0, 1, 2], [0, 2, 3]])), "NaN or infinite"),
+    (lambda d: write(d / "degenerate.obj", np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 0]]),
+                     np.array([[0, 1, 2], [0, 2, 3], [0, 4, 2]])), "degenerate"),
+    (lambda d: (d / "text.obj").write_text("this is no mesh\n") and str(d / "text.obj"), "scene.path"),
+])
+def test_a_bad_mesh_is_refused_in_one_line(make, message, tmp_path, tmp_path_factory, capsys):
+    from refusals import SMALL_RUN, assert_run_refused
+
+    path = make(tmp_path_factory.mktemp("meshes"))  # beside the run's directory, which must stay empty
+    assert_run_refused(f'[scene]\nkind = "mesh"\npath = "{path}"\n' + SMALL_RUN, message, tmp_path, capsys)
+
+
+def test_a_base_closes_a_tile_with_a_hole(tmp_path):
+    path = write(tmp_path / "hole.ply", *bumpy(drop=4))
+    cfg = {**mesh_config(path, albedo=1.0), "base": {"kind": "lambert", "albedo": 1.0}}
+    table = tables.load(session.run(cfg, tmp_path / "hole.h5").tables[0])
+    np.testing.assert_allclose(table.albedo, 1.0, rtol=0, atol=1e-12)
