@@ -13,6 +13,7 @@ that cannot fit); and
 (for "surface", a ``microsim.scene.Scene`` assembled with ``SceneBuilder``).
 """
 
-from . import halfspace_medium, mesh, micrograins, plane, poisson_spheres, vcavities
+from . import halfspace_medium, heightfield, mesh, micrograins, plane, poisson_spheres, vcavities
 
-SCENES = {module.KIND: module for module in (plane, poisson_spheres, micrograins, vcavities, halfspace_medium, mesh)}
+SCENES = {module.KIND: module for module in (plane, poisson_spheres, micrograins, vcavities, halfspace_medium, mesh,
+                                            heightfield)}

@@ -73,7 +73,7 @@ def test_a_white_closed_tile_returns_every_path(tmp_path):
     area = table.scene["area"]
     assert table.scene["mean_cosine"] == pytest.approx(4.0 / area, rel=1e-12)  # the tile's area over the mesh's
     assert table.scene["sha256"] == hashlib.sha256(open(path, "rb").read()).hexdigest()
-    assert table.scene["triangles"] > table.scene["mesh_triangles"] == 2 * N * N  # copies beyond the sides
+    assert table.scene["triangles"] > table.scene["surface_triangles"] == 2 * N * N  # copies beyond the sides
 
 
 @pytest.mark.parametrize("make, message", [

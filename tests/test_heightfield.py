@@ -1,0 +1,72 @@
+"""The heightfield scene (geometry/heightfield.py): a periodic height array, triangulated.
+
+- A flat array is the plane: the same paths give the plane's cells bit for bit.
+- A white Lambertian bumpy array is closed: every path leaves (albedo 1 to 1e-12) up to 89 deg.
+- The triangulation wraps: the grid's last row and column of vertices repeat the first a period
+  away, and its projected area is the tile's.
+- Bad arrays are refused in one line naming scene.path, exit 2, nothing written.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from geometry.heightfield import triangulate
+from microsim import session, tables
+
+
+def bumps(n: int = 32) -> np.ndarray:
+    x = np.arange(n) / n * 2 * math.pi
+    gx, gy = np.meshgrid(x, x, indexing="ij")
+    return 0.5 * np.sin(gx) * np.cos(2 * gy)
+
+
+def config(path, albedo=0.8, theta=(0.0, 60.0), pixel=0.1) -> dict:
+    return {"scene": {"kind": "heightfield", "path": str(path), "pixel": pixel},
+            "material": {"kind": "lambert", "albedo": albedo}, "illumination": {"theta_i_deg": list(theta)},
+            "sensor": {"cells": 100}, "run": {"paths": 40_000, "realizations": 4, "seed": 3}}
+
+
+def test_a_flat_heightfield_is_the_plane_bit_for_bit(tmp_path):
+    np.save(tmp_path / "flat.npy", np.zeros((8, 8)))
+    cfg = config(tmp_path / "flat.npy", theta=(0.0, 45.0, 85.0), pixel=0.125)  # a period of 1
+    flat = tables.load(session.run(cfg, tmp_path / "h.h5").tables[0])
+    plane = tables.load(session.run({**cfg, "scene": {"kind": "plane", "tile": 1.0}}, tmp_path / "p.h5").tables[0])
+    for name in ("brdf", "brdf_order", "brdf_stderr", "albedo"):
+        assert np.array_equal(flat.arrays[name], plane.arrays[name]), name
+
+
+def test_a_white_bumpy_heightfield_returns_every_path(tmp_path):
+    np.savez(tmp_path / "bumps.npz", height=bumps(), other=np.ones(3))
+    table = tables.load(session.run(config(tmp_path / "bumps.npz", albedo=1.0, theta=(0.0, 60.0, 89.0)),
+                                    tmp_path / "w.h5").tables[0])
+    np.testing.assert_allclose(table.albedo, 1.0, rtol=0, atol=1e-12)
+    assert not table.transmitted.any() and not table.truncated.any()
+    assert table.scene["period"] == pytest.approx(3.2) and table.scene["surface_triangles"] == 2 * 32 * 32
+
+
+def test_the_grid_wraps_at_the_period():
+    h = bumps(8)
+    vertices, faces = triangulate(h, 0.5)
+    grid = vertices.reshape(9, 9, 3)
+    assert np.array_equal(grid[-1, :, 2], grid[0, :, 2]) and np.array_equal(grid[:, -1, 2], grid[:, 0, 2])
+    corners = vertices[faces]
+    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    assert np.all(cross[:, 2] > 0) and 0.5 * cross[:, 2].sum() == pytest.approx(16.0, rel=1e-12)
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda d: str(d / "absent.npy"), "no such file"),
+    (lambda d: np.save(d / "nan.npy", np.where(np.eye(8) > 0, np.nan, 0.0)) or str(d / "nan.npy"), "NaN"),
+    (lambda d: np.save(d / "wide.npy", np.zeros((8, 16))) or str(d / "wide.npy"), "square array"),
+    (lambda d: np.savez(d / "two.npz", a=np.zeros((8, 8)), b=np.zeros((8, 8))) or str(d / "two.npz"), "'height'"),
+    (lambda d: (d / "text.npy").write_text("no array") and str(d / "text.npy"), "cannot be read"),
+])
+def test_a_bad_height_array_is_refused_in_one_line(make, message, tmp_path, tmp_path_factory, capsys):
+    from refusals import SMALL_RUN, assert_run_refused
+
+    path = make(tmp_path_factory.mktemp("heights"))  # beside the run's directory, which must stay empty
+    assert_run_refused(f'[scene]\nkind = "heightfield"\npath = "{path}"\n' + SMALL_RUN, message, tmp_path, capsys)
