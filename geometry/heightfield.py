@@ -82,7 +82,12 @@ def triangulate(h: np.ndarray, pixel: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def load(config) -> tuple[Tile, str]:
-    """The checked tile of the config's heights, and the file's SHA-256."""
+    """The checked tile of the config's heights and the file's SHA-256, read once
+    (:func:`geometry.periodic_tile.remembered`)."""
+    return periodic_tile.remembered(config, _read)
+
+
+def _read(config) -> tuple[Tile, str]:
     h, digest = heights(config)
     vertices, faces = triangulate(h, config.scene.pixel)
     tile = periodic_tile.checked(f"scene.path = {config.scene.path!r}", vertices, faces, len(h) * config.scene.pixel,

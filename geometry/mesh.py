@@ -41,8 +41,12 @@ class Config(Section):
 
 
 def load(config) -> tuple[Tile, str]:
-    """The checked tile of the config's mesh file and the file's SHA-256; ValueError, one line
-    naming scene.path."""
+    """The checked tile of the config's mesh file and the file's SHA-256, read once
+    (:func:`geometry.periodic_tile.remembered`); ValueError, one line naming scene.path."""
+    return periodic_tile.remembered(config, _read)
+
+
+def _read(config) -> tuple[Tile, str]:
     scene = config.scene
     key, file = periodic_tile.source(config)
     try:

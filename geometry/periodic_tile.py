@@ -60,6 +60,24 @@ def source(config) -> tuple[str, Path]:
     return key, file
 
 
+#: the last tile read (:func:`remembered`): its key and (tile, file digest)
+_LAST: dict = {}
+
+
+def remembered(config, read):
+    """``read(config)``, a scene's (tile, file digest), once for a file's state and the scene's
+    parameters: the config's check, its resolution and every realization of a run (in each
+    process) take the same tile without reading and checking the file again. One tile is kept."""
+    file = Path(config.scene.path)
+    state = (file.stat().st_mtime_ns, file.stat().st_size) if file.is_file() else None
+    key = (config.scene.model_dump_json(), config.base is not None, state)
+    if key not in _LAST:
+        value = read(config)
+        _LAST.clear()
+        _LAST[key] = value
+    return _LAST[key]
+
+
 def checked(key: str, vertices, faces, period: float | None, closed_by_base: bool) -> Tile:
     """The tile of triangles ``vertices`` (V, 3) and ``faces`` (F, 3) after the checks of the
     module doc; ``period`` None: the extent in x, which must equal the extent in y. ValueError,

@@ -244,6 +244,14 @@ class Result:
         return np.full(self.plan.n_incidences, self.plan.paths, dtype=np.int64)
 
 
+def unit_estimates(estimators, tally, incidence: int, albedo: int = 0):
+    """(estimator, its estimates by name) of every estimator of a unit's ``tally`` traced at
+    incidence number ``incidence``, for albedo number ``albedo`` of the run."""
+    for estimator, record in zip(estimators, tally.estimates):
+        fields = record._make(per_albedo(field[0], len(shape))[albedo] for field, shape in zip(record, estimator.shapes()))
+        yield estimator, estimator.reduce(fields, tally.paths, incidence)
+
+
 class _Reducer:
     """Sums unit tallies in unit order, buffering those that arrive early; one Result per albedo.
     Each estimator reduces its own fields (by name); the reducer keeps the mean and standard
@@ -274,10 +282,7 @@ class _Reducer:
         energy = per_albedo(tally.energy, 1)
         for j, res in enumerate(self.results):
             exited = 0.0
-            for estimator, record in zip(self.estimators, tally.estimates):
-                fields = record._make(per_albedo(field[0], len(shape))[j]
-                                      for field, shape in zip(record, estimator.shapes()))
-                estimates = estimator.reduce(fields, tally.paths, i)
+            for estimator, estimates in unit_estimates(self.estimators, tally, i, j):
                 for name, value in estimates.items():
                     if name not in res.estimates:
                         covariant = name in estimator.COVARIANT
@@ -383,9 +388,8 @@ def trace_realizations(config, workers: int = 1) -> tuple[Plan, dict[str, np.nda
 
     def keep(unit, tally, info):
         r, i = unit
-        for estimator, record in zip(run_estimators, tally.estimates):
-            fields = record._make(field[0] for field in record)
-            for name, value in estimator.reduce(fields, tally.paths, i).items():
+        for _, estimates in unit_estimates(run_estimators, tally, i):
+            for name, value in estimates.items():
                 out.setdefault(name, np.zeros((plan.realizations, plan.n_incidences, *value.shape)))[r, i] = value
 
     EXECUTORS["local"](plan, plan.units, keep, workers)
