@@ -1,7 +1,8 @@
 """What a generator hands the surface tracer: triangles and spheres for Embree, and the analytic data behind them.
 
-The scene is periodic in x and y over the tile [0, L)^2 (shapes crossing the tile edge come
-with their periodic images) and bounded in z: nothing can be hit above ``z_top``; a ray going
+The scene is periodic in x and y over the tile [0, L_x) x [0, L_y) (``tile`` and ``tile_y``;
+square unless ``tile_y`` is given; shapes crossing the tile edge come with their periodic images)
+and bounded in z: nothing can be hit above ``z_top``; a ray going
 below ``z_bottom`` has left through the bottom of the slab (transmitted). Every triangle names
 its analytic shape (``face_shape``); every shape names its material (an index into
 ``materials``). Generators assemble scenes with :class:`SceneBuilder`, which also lays the base
@@ -54,7 +55,7 @@ class SceneArrays(NamedTuple):
     shape_size: np.ndarray
     material_code: np.ndarray
     material_params: np.ndarray
-    tile: float
+    period: tuple  # (L_x, L_y), float64: the tile is [0, L_x) x [0, L_y)
     z_top: float
     z_bottom: float
     base_material: int  # the base plane's material index (its order-1 exits are tallied apart), -1: none
@@ -77,7 +78,7 @@ class Scene:
     face_shape: np.ndarray  # (F,) int32
     shapes: Shapes
     materials: MaterialTable
-    tile: float  # period L in x and y
+    tile: float  # period L_x in x (and in y unless tile_y is given)
     z_top: float
     z_bottom: float
     #: resolved parameters and measured properties, stored as the table's scene/ attrs
@@ -86,8 +87,13 @@ class Scene:
     sphere_shape: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))  # (K,) int32
     sphere_scale: tuple = (1.0, 1.0)
     base_material: int = -1
+    tile_y: float | None = None  # period L_y in y; None: the same as tile
 
     def __post_init__(self):
+        if self.tile_y is None:
+            self.tile_y = self.tile
+        if not (self.tile > 0.0 and self.tile_y > 0.0):
+            raise ValueError(f"the tile's sides must be positive: {self.tile!r} x {self.tile_y!r}")
         self.vertices = np.ascontiguousarray(self.vertices, dtype=np.float32)
         self.faces = np.ascontiguousarray(self.faces, dtype=np.int32)
         self.face_shape = np.ascontiguousarray(self.face_shape, dtype=np.int32)
@@ -97,6 +103,11 @@ class Scene:
             raise ValueError("every face and sphere needs a shape")
         if len(self.prim_shape) and self.prim_shape.max() >= len(self.shapes):
             raise ValueError("a primitive refers to a missing shape")
+
+    @property
+    def period(self) -> tuple[float, float]:
+        """The tile's sides (L_x, L_y)."""
+        return float(self.tile), float(self.tile_y)
 
     @property
     def n_triangles(self) -> int:
@@ -109,18 +120,20 @@ class Scene:
     def arrays(self) -> SceneArrays:
         s = self.shapes
         return SceneArrays(self.prim_shape, s.code, s.params, s.material, s.size, self.materials.code,
-                           self.materials.params, self.tile, self.z_top, self.z_bottom, self.base_material)
+                           self.materials.params, self.period, self.z_top, self.z_bottom, self.base_material)
 
 
 class SceneBuilder:
     """Assembles a :class:`Scene` part by part: each part's triangles, shapes and material.
 
     Parts keep the order in which they are added (triangle, shape and material indices follow
-    it); the table's ``triangles`` count is added to the scene's info.
+    it); the table's ``triangles`` count is added to the scene's info. The tile is
+    [0, tile) x [0, tile_y) (``tile_y`` None: square).
     """
 
-    def __init__(self, tile: float):
+    def __init__(self, tile: float, tile_y: float | None = None):
         self.tile = tile
+        self.tile_y = tile if tile_y is None else tile_y
         self.vertices, self.faces, self.face_shape, self.shapes, self.materials = [], [], [], [], []
         self.spheres, self.sphere_shape = [], []
         self.sphere_scale = (1.0, 1.0)
@@ -164,11 +177,14 @@ class SceneBuilder:
         self.n_shapes += len(shapes)
 
     def add_base_plane(self, z: float, material: Material) -> None:
-        """The plane at height ``z`` facing +z: two triangles covering the tile with a margin."""
-        lo, hi = -BASE_MARGIN * self.tile, (1.0 + BASE_MARGIN) * self.tile
-        vertices = np.array([[lo, lo, z], [hi, lo, z], [hi, hi, z], [lo, hi, z]], dtype=np.float32)
+        """The plane at height ``z`` facing +z: two triangles covering the tile with a margin
+        (BASE_MARGIN of each side beyond it); its size (the clearance's scale) is the longer side."""
+        x0, x1 = -BASE_MARGIN * self.tile, (1.0 + BASE_MARGIN) * self.tile
+        y0, y1 = -BASE_MARGIN * self.tile_y, (1.0 + BASE_MARGIN) * self.tile_y
+        vertices = np.array([[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]], dtype=np.float32)
         faces = np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int32)
-        plane = Shapes.planes(np.array([[0.0, 0.0, z]]), np.array([[0.0, 0.0, 1.0]]), size=self.tile)
+        plane = Shapes.planes(np.array([[0.0, 0.0, z]]), np.array([[0.0, 0.0, 1.0]]),
+                              size=max(self.tile, self.tile_y))
         self.base_material = len(self.materials)
         self.add(vertices, faces, np.zeros(2, np.int32), plane, material)
 
@@ -180,4 +196,4 @@ class SceneBuilder:
                      dict(info, triangles=int(len(faces))),
                      np.concatenate(self.spheres or [np.zeros((0, 4))]),
                      np.concatenate(self.sphere_shape or [np.zeros(0, np.int32)]), self.sphere_scale,
-                     self.base_material)
+                     self.base_material, self.tile_y)

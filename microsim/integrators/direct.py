@@ -158,7 +158,7 @@ def visible_through_tile(world, work, i, state, wo):
     if wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2] <= 0.0 or wo[2] <= 0.0:
         return 0.0
     rays = work.rays
-    o = wrap_point(p, n, clearance(p, scene.shape_size[s]), scene.tile)
+    o = wrap_point(p, n, clearance(p, scene.shape_size[s]), scene.period)
     for _ in range(MAX_IDLE_SEGMENTS):
         prepare_segment(rays, i, o, wo, scene)
         end, t = rays.end[i], np.float64(rays.tfar[i])
@@ -167,5 +167,5 @@ def visible_through_tile(world, work, i, state, wo):
         if end == TOP:
             return 1.0
         o = (np.float64(rays.origin[i, 0]), np.float64(rays.origin[i, 1]), np.float64(rays.origin[i, 2]))
-        o = wrap_side(o, wo, t, end, scene.tile)
+        o = wrap_side(o, wo, t, end, scene.period)
     return 0.0

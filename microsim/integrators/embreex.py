@@ -86,7 +86,7 @@ def queue_shadow_ray(world, work, i, state, wo, payload):
     if j >= len(queue.amount):  # a pass has one interaction a path and a path k points at most
         raise IndexError("the shadow queue is full")
     queue.count[0] = j + 1
-    prepare_segment(queue.rays, j, wrap_point(p, n, clearance(p, scene.shape_size[s]), scene.tile), wo, scene)
+    prepare_segment(queue.rays, j, wrap_point(p, n, clearance(p, scene.shape_size[s]), scene.period), wo, scene)
     queue.amount[j], queue.point[j], queue.order[j] = payload
     queue.wraps[j] = 0
     return 0.0
@@ -213,7 +213,7 @@ def settle_shadows(m, shadows, blocked, scene, tally):
             continue
         o = (np.float64(rays.origin[j, 0]), np.float64(rays.origin[j, 1]), np.float64(rays.origin[j, 2]))
         d = (np.float64(rays.direction[j, 0]), np.float64(rays.direction[j, 1]), np.float64(rays.direction[j, 2]))
-        o = wrap_side(o, d, np.float64(rays.tfar[j]), end, scene.tile)
+        o = wrap_side(o, d, np.float64(rays.tfar[j]), end, scene.period)
         shadows.amount[live], shadows.point[live], shadows.order[live] = shadows.amount[j], shadows.point[j], shadows.order[j]
         shadows.wraps[live] = shadows.wraps[j] + 1
         prepare_segment(rays, live, o, d, scene)

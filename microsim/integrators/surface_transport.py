@@ -9,6 +9,8 @@ material and offsets it (:func:`interact_on_shape`), and books it;
 a ray that meets a surface from behind passes through (:func:`pass_through`); a ray that reaches
 the tile side wraps to the opposite side (:func:`wrap_side`); one that reaches ``z_top`` leaves
 (the run's estimators see it); one that reaches ``z_bottom`` is transmitted.
+The tile is [0, L_x) x [0, L_y) (``scene.period``, :class:`microsim.scene.SceneArrays`): x is
+folded and wrapped by L_x, y by L_y (for a square tile, the arithmetic of a tile of one side).
 These kernels are shared by the surface tracer's two backends (:mod:`.surface`), which differ
 only in how they call Embree and schedule paths: :mod:`.direct` and :mod:`.embreex`.
 
@@ -62,8 +64,8 @@ MIN_PASS_COSINE = 1e-3
 def start_path(paths, rays, i, number, beam, scene):
     """Path ``number`` of the beam starts in row i: a uniform point of the tile at z_top, along -wi."""
     begin_path(paths, i, number, beam.key)
-    x = uniform(paths.rng, i) * scene.tile
-    y = uniform(paths.rng, i) * scene.tile
+    x = uniform(paths.rng, i) * scene.period[0]
+    y = uniform(paths.rng, i) * scene.period[1]
     prepare_segment(rays, i, (x, y, scene.z_top), (-beam.wi[0], -beam.wi[1], -beam.wi[2]), scene)
 
 
@@ -89,7 +91,7 @@ def follow(work, i, hit, world, sensor, max_order, tally):
         facing = d[0] * ng[0] + d[1] * ng[1] + d[2] * ng[2]
         if facing >= 0.0:
             tally.counts[INSIDE_HITS] += 1
-            state = (pass_through(h, d, facing, ng, scene.shape_size[s], scene.tile), state[1], -1)
+            state = (pass_through(h, d, facing, ng, scene.shape_size[s], scene.period), state[1], -1)
         else:
             q, n = surface_point(scene.shape_code[s], scene.shape_params[s], h)
             kind, state = INTERACTION, (q, n, s)
@@ -100,7 +102,7 @@ def follow(work, i, hit, world, sensor, max_order, tally):
         elif end == BOTTOM:
             kind = TRANSMISSION
         else:
-            state = (wrap_side(o, d, t, end, scene.tile), state[1], -1)
+            state = (wrap_side(o, d, t, end, scene.period), state[1], -1)
     alive, d, state = take_event(world, work, i, (kind, d, state), max_order, sensor, tally, interact_on_shape)
     return alive, state[0], d
 
@@ -117,7 +119,7 @@ def interact_on_shape(world, paths, i, path):
     if paths.order[i] == 0:
         paths.from_base[i] = m == scene.base_material
     paths.idle[i] = 0
-    return wo, factor, cut, (wrap_point(p, n, clearance(p, scene.shape_size[s]), scene.tile), n, s)
+    return wo, factor, cut, (wrap_point(p, n, clearance(p, scene.shape_size[s]), scene.period), n, s)
 
 
 def evaluate_on_shape(world, state, wi, wo):
@@ -130,11 +132,12 @@ def evaluate_on_shape(world, state, wi, wo):
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def pass_through(h, d, facing, ng, size, tile):
-    """Origin past a back face hit at h: far enough along d to clear the face in float32."""
+def pass_through(h, d, facing, ng, size, period):
+    """Origin past a back face hit at h: far enough along d to clear the face in float32 (folded
+    into the tile of sides ``period``)."""
     cosine = facing / math.sqrt(ng[0] ** 2 + ng[1] ** 2 + ng[2] ** 2)
     nudge = clearance(h, size) / max(cosine, MIN_PASS_COSINE)
-    return wrap_point(h, d, nudge, tile)
+    return wrap_point(h, d, nudge, period)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
@@ -144,18 +147,19 @@ def clearance(p, size):
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def wrap_point(p, v, distance, tile):
-    """p + distance v, folded into the tile in x and y."""
-    return wrap(p[0] + distance * v[0], tile), wrap(p[1] + distance * v[1], tile), p[2] + distance * v[2]
+def wrap_point(p, v, distance, period):
+    """p + distance v, folded into the tile of sides ``period`` = (L_x, L_y) in x and y."""
+    return wrap(p[0] + distance * v[0], period[0]), wrap(p[1] + distance * v[1], period[1]), p[2] + distance * v[2]
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def wrap_side(o, d, t, end, tile):
-    """The ray from o along d reaches the tile side ``end`` at t: continue from the opposite side."""
+def wrap_side(o, d, t, end, period):
+    """The ray from o along d reaches the side ``end`` of the tile of sides ``period`` = (L_x, L_y)
+    at t: continue from the opposite side."""
     x, y, z = o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]
     if end == SIDE_X:
-        return (0.0 if d[0] > 0.0 else tile), wrap(y, tile), z
-    return wrap(x, tile), (0.0 if d[1] > 0.0 else tile), z
+        return (0.0 if d[0] > 0.0 else period[0]), wrap(y, period[1]), z
+    return wrap(x, period[0]), (0.0 if d[1] > 0.0 else period[1]), z
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
@@ -183,10 +187,10 @@ def prepare_segment(rays, i, o, d, scene):
         t, end = (scene.z_bottom - oz) / dz, BOTTOM
     else:
         t, end = math.inf, TOP
-    side_x = scene.tile - ox if dx > 0.0 else ox
+    side_x = scene.period[0] - ox if dx > 0.0 else ox
     if side_x < abs(dx) * t:
         t, end = side_x / abs(dx), SIDE_X
-    side_y = scene.tile - oy if dy > 0.0 else oy
+    side_y = scene.period[1] - oy if dy > 0.0 else oy
     if side_y < abs(dy) * t:
         t, end = side_y / abs(dy), SIDE_Y
     rays.end[i] = end
