@@ -11,6 +11,8 @@ about how much memory one realization takes once built for Embree (the runner re
 that cannot fit); and
 ``generate(resolved, config, rng)``, one random realization in the form its integrator takes
 (for "surface", a ``microsim.scene.Scene`` assembled with ``SceneBuilder``).
+Optionally ``SIZE``, the advice the memory refusal gives on a scene's size
+(default: lower the scene's tile or depth).
 """
 
 from . import halfspace_medium, heightfield, mesh, micrograins, plane, poisson_spheres, vcavities

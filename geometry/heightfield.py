@@ -1,44 +1,131 @@
 """A periodic height array, triangulated: one period of a surface repeated in x and y
 (docs/conventions.md §5.7).
 
-``path`` names a ``.npy`` file, or a ``.npz`` whose array ``height`` (or its only array) is
-taken: a square array h (n x n samples) of one period, sample (i, j) at (i pixel, j pixel),
-height ``height_scale`` h; the period is n ``pixel``, and the grid wraps (the sample after the
-last is the first). Each grid cell is two triangles (split along its diagonal from (i, j) to
-(i + 1, j + 1)), each its own flat facet: a heightfield is a :mod:`geometry.periodic_tile` like
-a user's mesh, checked, laid and summarized as it is. Gaussian random surfaces generated per
-realization are planned.
+Two sources of heights:
+
+- ``path`` names a ``.npy`` file, or a ``.npz`` whose array ``height`` (or its only array) is
+  taken: a square array h (n x n samples) of one period, sample (i, j) at (i pixel, j pixel),
+  height ``height_scale`` h. Nothing is random: every realization is the same tile.
+- ``generator = "gaussian"``: a random Gaussian surface drawn afresh every realization
+  (:mod:`geometry.gaussian_surface`): ``roughness`` (or ``rms_slope``, the same number), or
+  ``roughness_x`` + ``roughness_y``, in the ``microfacet`` model's Beckmann alpha meaning (the
+  facets' slopes have variance alpha^2 / 2 along each axis), ``correlation_length`` (the
+  Gaussian autocorrelation's length, geometric mean of x and y), ``pixel`` (default:
+  correlation_length / SAMPLES_PER_CORRELATION) and ``tile`` (default: gaussian_surface.default_tile).
+
+The period is n ``pixel``, and the grid wraps (the sample after the last is the first). Each
+grid cell is two triangles (:func:`triangulate`), each its own flat facet: a heightfield is a
+:mod:`geometry.periodic_tile` like a user's mesh, checked, laid and summarized as it is; a
+generated one records in ``scene/`` per realization what a file's records once (area,
+mean_cosine, rms_slope, z_top, ...). With ``statistics = true`` each realization's measured
+NDF, visible NDF and G1 are stored too (:mod:`microsim.surface_statistics`).
 """
 
 from __future__ import annotations
 
 import hashlib
+import math
 from typing import Literal
 
 import numpy as np
+import pydantic
 from pydantic import Field
 
+from microsim.physics import distributions as nd
+from microsim import surface_statistics
 from microsim.scene import Scene
 from microsim.schema import Section
 
-from . import periodic_tile
+from . import gaussian_surface, periodic_tile
 from .periodic_tile import Tile
 
 KIND = "heightfield"
 INTEGRATOR = "surface"
-#: the generator protocol's, as every periodic tile has them
-for_backend, scene_bytes = periodic_tile.for_backend, periodic_tile.scene_bytes
+#: what sets the scene's size, for the memory refusal (microsim.runner.check_memory)
+SIZE = "take fewer samples (a smaller array in scene.path; a shorter scene.tile or a larger scene.pixel)"
+#: the generator protocol's, as every periodic tile has it
+for_backend = periodic_tile.for_backend
 #: most samples a side of a height array
 MAX_SAMPLES = 4096
+#: keys of a generated surface only, and of a height file only
+GENERATOR_KEYS = ("roughness", "roughness_x", "roughness_y", "rms_slope", "correlation_length", "tile")
+FILE_KEYS = ("height_scale",)
+#: a heightfield's facets are a pixel across: its copies beyond the sides add at most this share
+#: of its triangles (those within BASE_MARGIN and one pixel of a side)
+COPIES_SHARE = 0.1
 
 
 class Config(Section):
     kind: Literal["heightfield"]
-    path: str = Field(min_length=1, description="the heights: a .npy file, or a .npz with an array 'height' (or "
-                                                "one array), square, one period (relative to the directory "
-                                                "microsim runs in)")
-    pixel: float = Field(1.0, gt=0.0, le=1e9, description="spacing of the samples in x and y")
-    height_scale: float = Field(1.0, gt=0.0, le=1e9, description="factor applied to the heights")
+    path: str | None = Field(None, min_length=1, description="the heights: a .npy file, or a .npz with an array "
+                             "'height' (or one array), square, one period (relative to the directory microsim runs "
+                             "in); or give generator")
+    generator: Literal["gaussian"] | None = Field(None, description="a random surface drawn every realization "
+                                                  "instead of a file: gaussian (Gaussian heights and autocorrelation)")
+    pixel: float | None = Field(None, gt=0.0, le=1e9, description="spacing of the samples in x and y (default: 1 "
+                                "for a file; correlation_length / 8 for a generated surface)")
+    height_scale: float | None = Field(None, gt=0.0, le=1e9, description="factor applied to a file's heights "
+                                       "(default 1)")
+    roughness: float | None = Field(None, ge=nd.ROUGHNESS_MIN, le=nd.ROUGHNESS_MAX,
+                                    description="generated: Beckmann alpha of the facets' slopes, both axes")
+    roughness_x: float | None = Field(None, ge=nd.ROUGHNESS_MIN, le=nd.ROUGHNESS_MAX,
+                                      description="generated: alpha along x")
+    roughness_y: float | None = Field(None, ge=nd.ROUGHNESS_MIN, le=nd.ROUGHNESS_MAX,
+                                      description="generated: alpha along y")
+    rms_slope: float | None = Field(None, ge=nd.ROUGHNESS_MIN, le=nd.ROUGHNESS_MAX,
+                                    description="generated: RMS of the slope's magnitude, sqrt(<|grad h|^2>) (the "
+                                    "isotropic alpha)")
+    correlation_length: float | None = Field(None, gt=0.0, le=1e9, description="generated: length l of the "
+                                             "Gaussian autocorrelation exp(-r^2 / l^2) (geometric mean of x and y; "
+                                             "default 1)")
+    tile: float | None = Field(None, gt=0.0, le=1e9, description="generated: the period (default: 16 correlation "
+                               "lengths, longer where grazing rays need it; whole pixels)")
+    statistics: bool = surface_statistics.statistics_key()
+    statistics_rays: int | None = surface_statistics.rays_key()
+
+    @pydantic.model_validator(mode="after")
+    def _one_source(self):
+        given = self.model_fields_set
+        surface_statistics.check_keys(self)
+        if (self.path is None) == (self.generator is None):
+            raise ValueError("scene.path: give either path (a height file) or generator = \"gaussian\", "
+                             f"{'not both' if self.path is not None else 'one of them'}")
+        wrong = [key for key in (FILE_KEYS if self.generator else GENERATOR_KEYS) if key in given]
+        if wrong:
+            what = "a height file" if self.generator else "generator = \"gaussian\""
+            raise ValueError(f"scene.{wrong[0]}: for {what} only")
+        if self.generator is None:
+            return self
+        forms = [key for key in ("roughness", "rms_slope") if key in given]
+        axes = [key for key in ("roughness_x", "roughness_y") if key in given]
+        accepted = f"[{nd.ROUGHNESS_MIN:g}, {nd.ROUGHNESS_MAX:g}]"
+        if len(forms) + bool(axes) != 1 or len(axes) == 1:
+            raise ValueError(f"scene.roughness: give one of roughness, rms_slope, or roughness_x and roughness_y, "
+                             f"each in {accepted}")
+        if self.pixel is not None and self.pixel > self.correlation:
+            raise ValueError(f"scene.correlation_length = {self.correlation:g} is below scene.pixel = "
+                             f"{self.pixel:g}; accepted: correlation_length >= pixel (at least one sample a "
+                             f"correlation length; default pixel: correlation_length / "
+                             f"{gaussian_surface.SAMPLES_PER_CORRELATION})")
+        return self
+
+    @property
+    def correlation(self) -> float:
+        """correlation_length, 1 where not given (None stays out of the config's TOML, which a
+        height file's config must not hold)."""
+        return 1.0 if self.correlation_length is None else self.correlation_length
+
+    @property
+    def height_factor(self) -> float:
+        """height_scale, 1 where not given."""
+        return 1.0 if self.height_scale is None else self.height_scale
+
+    @property
+    def roughnesses(self) -> tuple[float, float]:
+        if self.roughness_x is not None:
+            return self.roughness_x, self.roughness_y
+        alpha = self.roughness if self.roughness is not None else self.rms_slope
+        return alpha, alpha
 
 
 def heights(config) -> tuple[np.ndarray, str]:
@@ -63,49 +150,126 @@ def heights(config) -> tuple[np.ndarray, str]:
                          f"2 to {MAX_SAMPLES} samples a side (rectangular ones are planned)")
     if bad := np.count_nonzero(~np.isfinite(h)):
         raise ValueError(f"{key}: {bad} of {h.size} heights are NaN or infinite")
-    return h.astype(np.float64) * scene.height_scale, hashlib.sha256(data).hexdigest()
+    return h.astype(np.float64) * scene.height_factor, hashlib.sha256(data).hexdigest()
 
 
 def triangulate(h: np.ndarray, pixel: float) -> tuple[np.ndarray, np.ndarray]:
     """Vertices ((n + 1)^2, 3) and faces (2 n^2, 3) of the periodic grid of heights ``h`` (n x n):
-    the last row and column of vertices repeat the first a period away."""
+    the last row and column of vertices repeat the first a period away. Cell (i, j) is split
+    along its diagonal from (i, j) to (i + 1, j + 1) where i + j is even, along the other one
+    where it is odd (geometry.gaussian_surface: the facets' slopes along x and y are then not
+    correlated on average)."""
     n = len(h)
     wrapped = np.pad(h, ((0, 1), (0, 1)), mode="wrap")
     x = np.arange(n + 1) * pixel
     gx, gy = np.meshgrid(x, x, indexing="ij")
     vertices = np.column_stack([gx.ravel(), gy.ravel(), wrapped.ravel()])
     i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    a = (i * (n + 1) + j).ravel()
+    a = (i * (n + 1) + j).ravel()  # corner (i, j); b (i + 1, j), c (i + 1, j + 1), d (i, j + 1)
     b, c, d = a + n + 1, a + n + 2, a + 1
-    faces = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
-    return vertices, faces
+    even = ((i + j) % 2 == 0).ravel()
+    first = np.where(even[:, None], np.column_stack([a, b, c]), np.column_stack([a, b, d]))
+    second = np.where(even[:, None], np.column_stack([a, c, d]), np.column_stack([b, c, d]))
+    return vertices, np.concatenate([first, second])
 
 
 def load(config) -> tuple[Tile, str]:
-    """The checked tile of the config's heights and the file's SHA-256, read once
+    """The checked tile of the config's height file and the file's SHA-256, read once
     (:func:`geometry.periodic_tile.remembered`)."""
     return periodic_tile.remembered(config, _read)
 
 
 def _read(config) -> tuple[Tile, str]:
+    """The file's tile. A periodic grid's triangles are a surface over the tile by construction
+    (their seams match, they face up, none is degenerate): the mesh checks have nothing to find,
+    and are not run (their edge matching took a minute at 2048^2 samples)."""
     h, digest = heights(config)
-    vertices, faces = triangulate(h, config.scene.pixel)
-    tile = periodic_tile.checked(f"scene.path = {config.scene.path!r}", vertices, faces, len(h) * config.scene.pixel,
-                                 closed_by_base=config.base is not None)
-    return tile, digest
+    pixel = file_pixel(config.scene)
+    periodic_tile.require_period(f"scene.pixel = {pixel:g}", len(h) * pixel)
+    return Tile.of(*triangulate(h, pixel), len(h) * pixel), digest
+
+
+def file_pixel(scene) -> float:
+    return scene.pixel if scene.pixel is not None else 1.0
 
 
 def check(config) -> None:
-    load(config)
+    if config.scene.generator is None:
+        load(config)
+    else:
+        _generated(config)
+
+
+def _generated(config) -> dict:
+    """The resolved parameters of a generated surface (module doc); ValueError, one line, for a
+    tile too short for its correlation or with more than MAX_SAMPLES samples a side."""
+    scene = config.scene
+    alpha_x, alpha_y = scene.roughnesses
+    pixel = scene.pixel if scene.pixel is not None else \
+        scene.correlation / gaussian_surface.SAMPLES_PER_CORRELATION
+    field = gaussian_surface.field_parameters(alpha_x, alpha_y, scene.correlation, pixel)
+    longest = max(field["correlation_x"], field["correlation_y"])
+    grazing = math.radians(max(max(config.illumination.theta_i_deg), 85.0))
+    default, floor = gaussian_surface.default_tile(field["sigma"], longest, pixel, grazing)
+    samples = round((scene.tile if scene.tile is not None else default) / pixel)
+    shortest = gaussian_surface.MIN_TILE_CORRELATIONS * longest
+    if samples * pixel < shortest * (1 - 1e-9):
+        if scene.tile is not None:
+            raise ValueError(f"scene.tile = {scene.tile:g}: shorter than {gaussian_surface.MIN_TILE_CORRELATIONS} "
+                             f"correlation lengths ({longest:.4g} along the longer axis); accepted: tile >= "
+                             f"{shortest:.4g}")
+        raise ValueError(f"scene.pixel = {pixel:g}: the default tile of {samples} samples is shorter than "
+                         f"{gaussian_surface.MIN_TILE_CORRELATIONS} correlation lengths ({shortest:.4g}); accepted: "
+                         f"pixel >= {shortest / gaussian_surface.MAX_DEFAULT_SAMPLES:.4g}, or give scene.tile (up to "
+                         f"{MAX_SAMPLES} samples)")
+    periodic_tile.require_period(f"scene.tile = {samples * pixel:g}" if scene.tile is not None
+                                 else f"scene.correlation_length = {scene.correlation:g}", samples * pixel)
+    if not 2 <= samples <= MAX_SAMPLES:
+        raise ValueError(f"scene.tile = {samples * pixel:g}: {samples} samples of scene.pixel = {pixel:g} a side; "
+                         f"accepted: 2 to {MAX_SAMPLES}")
+    period = samples * pixel
+    return {"kind": KIND, "generator": scene.generator, "roughness_x": alpha_x, "roughness_y": alpha_y,
+            "correlation_length": scene.correlation, **field, "pixel": pixel, "samples": samples,
+            "samples_per_correlation": scene.correlation / pixel, "period": period, "tile": period,
+            "tile_default": scene.tile is None, "tile_bias_floor": floor, "surface_triangles": 2 * samples**2,
+            "max_mesh_error": 0.0}
 
 
 def resolve(config) -> dict:
     scene = config.scene
+    statistics = surface_statistics.resolve(config, isotropic=scene.generator is not None
+                                            and scene.roughnesses[0] == scene.roughnesses[1])
+    if scene.generator is not None:
+        return {**_generated(config), **statistics}
     tile, digest = load(config)
-    return {"kind": KIND, "path": scene.path, "pixel": scene.pixel, "height_scale": scene.height_scale,
-            "sha256": digest, **periodic_tile.summary(tile)}
+    return {"kind": KIND, "path": scene.path, "pixel": file_pixel(scene), "height_scale": scene.height_factor,
+            "sha256": digest, **periodic_tile.summary(tile), **statistics}
+
+
+def scene_bytes(resolved: dict) -> int:
+    """The triangles: each a pixel across, so that few are copied beyond the sides (COPIES_SHARE)."""
+    return int((1.0 + COPIES_SHARE) * resolved["surface_triangles"] * periodic_tile.TRIANGLE_BYTES) + 4096
+
+
+def realize(resolved: dict, rng: np.random.Generator) -> Tile:
+    """The tile of one generated surface of ``resolved`` (a generator's), drawn from ``rng``."""
+    pixel = resolved["pixel"]
+    h = gaussian_surface.heights(resolved["samples"], pixel, resolved["sigma"], resolved["correlation_x"],
+                                 resolved["correlation_y"], rng)
+    return Tile.of(*triangulate(h, pixel), resolved["period"])
 
 
 def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
-    """The tile (:func:`geometry.periodic_tile.build`); nothing is random."""
-    return periodic_tile.build(load(config)[0], resolved, config.material, config.base)
+    """The tile (:func:`geometry.periodic_tile.build`): the file's, or a Gaussian surface drawn
+    from ``rng``, whose own summary (area, mean_cosine, rms_slope, heights) the scene's info
+    carries; with ``statistics``, the realization's NDF and masking measured."""
+    if resolved.get("generator") is None:
+        tile = load(config)[0]
+        scene = periodic_tile.build(tile, resolved, config.material, config.base)
+    else:
+        tile = realize(resolved, rng)
+        own = periodic_tile.summary(tile)
+        scene = periodic_tile.build(tile, {**resolved, **own}, config.material, config.base)
+        scene.info.update({key: own[key] for key in own.keys() - resolved.keys()})
+        scene.info.update(zip(("measured_roughness_x", "measured_roughness_y"), periodic_tile.roughness(tile)))
+    return surface_statistics.add(scene, tile, resolved, config, rng)

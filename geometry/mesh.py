@@ -1,12 +1,18 @@
 """A user's periodic tile: a triangle mesh repeated in x and y (docs/conventions.md §5.6).
 
-The mesh (OBJ, PLY, STL, GLB or OFF, read by trimesh) is one period of a surface: its x and y
-bounds are the tile, ``period`` on each side (square tiles; ``period_x`` and ``period_y`` are
-planned), lengths in the mesh's own units times ``scale``. It is checked, laid and summarized as
+The mesh (OBJ, PLY, STL, GLB or OFF, read by trimesh) is one period of a surface, lengths in the
+mesh's own units times ``scale``. Without a period its x and y bounds are the tile (their extents
+are the periods L_x and L_y). With ``period`` (a square tile), or ``period_x`` and ``period_y``,
+the tile is [0, L_x) x [0, L_y) in the mesh's coordinates (times ``scale``) and the mesh is laid
+where it lies: parts beyond a side, at most one period beyond, are wrapped
+in by the period, so closed bodies may cross the sides (a Boolean-sphere realization written by
+:func:`geometry.poisson_spheres.export_tile`); seams are matched a period apart wherever the
+mesh's bounds put them. It is checked, laid and summarized as
 every periodic tile is (:mod:`geometry.periodic_tile`: refusals of meshes through which a ray
 could leak, flat facets, copies beyond the sides, an optional ``[base]`` under it); every
 triangle is shaded by its own normal (``shading = "flat"``; interpolated normals are planned).
-The table also records the file's SHA-256.
+The table also records the file's SHA-256; with ``statistics = true``, every realization's
+measured NDF, visible NDF and G1 (:mod:`microsim.surface_statistics`).
 """
 
 from __future__ import annotations
@@ -15,8 +21,10 @@ import hashlib
 from typing import Literal
 
 import numpy as np
+import pydantic
 from pydantic import Field
 
+from microsim import surface_statistics
 from microsim.scene import Scene
 from microsim.schema import Section
 
@@ -25,6 +33,8 @@ from .periodic_tile import Tile
 
 KIND = "mesh"
 INTEGRATOR = "surface"
+#: what sets the scene's size, for the memory refusal (microsim.runner.check_memory)
+SIZE = "take fewer triangles in scene.path"
 #: the generator protocol's, as every periodic tile has them
 for_backend, scene_bytes = periodic_tile.for_backend, periodic_tile.scene_bytes
 
@@ -33,11 +43,35 @@ class Config(Section):
     kind: Literal["mesh"]
     path: str = Field(min_length=1, description="the mesh file: OBJ, PLY, STL, GLB or OFF (relative to the "
                                                 "directory microsim runs in)")
-    period: float | None = Field(None, gt=0.0, le=1e9, description="the tile's side in the mesh's units times "
-                                 "scale (default: the mesh's extent in x, which must equal its extent in y)")
+    period: float | None = Field(None, gt=0.0, le=1e9, description="the square tile's side in the mesh's units "
+                                 "times scale; given, the tile is [0, period)^2 where the mesh lies, parts beyond a "
+                                 "side wrapped in (default: the mesh's bounds)")
+    period_x: float | None = Field(None, gt=0.0, le=1e9, description="a rectangular tile's side along x (with "
+                                   "period_y; instead of period)")
+    period_y: float | None = Field(None, gt=0.0, le=1e9, description="a rectangular tile's side along y (with "
+                                   "period_x)")
     scale: float = Field(1.0, gt=0.0, le=1e9, description="factor applied to the mesh's coordinates")
     shading: Literal["flat"] = Field("flat", description="flat: every triangle shaded by its own normal "
                                      "(interpolated vertex normals are planned)")
+    statistics: bool = surface_statistics.statistics_key()
+    statistics_rays: int | None = surface_statistics.rays_key()
+
+    @pydantic.model_validator(mode="after")
+    def _one_period(self):
+        surface_statistics.check_keys(self)
+        sides = [key for key in ("period_x", "period_y") if getattr(self, key) is not None]
+        if self.period is not None and sides:
+            raise ValueError(f"scene.period: give either period (a square tile) or period_x and period_y, not both "
+                             f"(got period and {sides[0]})")
+        if len(sides) == 1:
+            partner = "period_y" if sides[0] == "period_x" else "period_x"
+            raise ValueError(f"scene.{partner}: missing; {sides[0]} needs it (each in (0, 1e9]), or give period")
+        return self
+
+    @property
+    def tile_sides(self):
+        """The period as periodic_tile.checked takes it: None, a side, or (L_x, L_y)."""
+        return (self.period_x, self.period_y) if self.period_x is not None else self.period
 
 
 def load(config) -> tuple[Tile, str]:
@@ -56,8 +90,8 @@ def _read(config) -> tuple[Tile, str]:
         data = file.read_bytes()
     except Exception as err:  # trimesh raises what its loaders raise
         raise ValueError(f"{key}: cannot be read as a mesh ({' '.join(str(err).split())[:200]})") from None
-    tile = periodic_tile.checked(key, np.asarray(mesh.vertices, np.float64) * scene.scale, mesh.faces, scene.period,
-                                 closed_by_base=config.base is not None)
+    vertices = np.asarray(mesh.vertices, np.float64) * scene.scale
+    tile = periodic_tile.checked(key, vertices, mesh.faces, scene.tile_sides, closed_by_base=config.base is not None)
     return tile, hashlib.sha256(data).hexdigest()
 
 
@@ -69,9 +103,12 @@ def resolve(config) -> dict:
     scene = config.scene
     tile, digest = load(config)
     return {"kind": KIND, "path": scene.path, "scale": scene.scale, "shading": scene.shading, "sha256": digest,
-            **periodic_tile.summary(tile)}
+            **periodic_tile.summary(tile), **surface_statistics.resolve(config, isotropic=False)}
 
 
 def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
-    """The tile (:func:`geometry.periodic_tile.build`); nothing is random."""
-    return periodic_tile.build(load(config)[0], resolved, config.material, config.base)
+    """The tile (:func:`geometry.periodic_tile.build`); nothing is random but, with
+    ``statistics``, the points the masking's shadow rays start from."""
+    tile = load(config)[0]
+    return surface_statistics.add(periodic_tile.build(tile, resolved, config.material, config.base), tile, resolved,
+                                  config, rng)

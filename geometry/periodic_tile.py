@@ -1,18 +1,27 @@
 """One period of a triangulated surface, repeated in x and y: its checks, its summary, its scene.
 
 What the ``mesh`` and ``heightfield`` scenes share (docs/conventions.md §5.6-7). A :class:`Tile`
-is the triangles of one period with the tile at [0, period)^2. :func:`checked` refuses, in one
-line naming the scene's key, a tile through which a ray could leak or that is not a surface:
-vertices not finite, faces of zero area, normals pointing down on average (inverted
-orientation), vertices outside one period, open edges on the tile's sides that have no twin a
-period away (seams that do not match), and a surface that does not cover the tile (its faces'
-signed projected area is not the tile's: a hole reaching the bottom) unless a base closes it.
+is the triangles of one period, the tile at [0, L_x) x [0, L_y) of their coordinates (square
+unless the sides differ); parts of it may lie beyond a side (closed bodies that cross it, as a
+Boolean-sphere realization's spheres do), at most one period beyond, and are wrapped in by the
+period. :func:`checked` takes the tile as the mesh's bounds where no period is given (moved to
+start at 0), and as [0, L_x) x [0, L_y) where the mesh lies when one is; it refuses, in one line
+naming the scene's key, a tile through which a ray could leak or that is not a surface: vertices
+not finite, faces of zero area, inverted orientation (normals pointing down on average; or,
+where the faces cover the tile no net area, closed parts enclosing a negative volume), vertices
+more than one period beyond the tile (period given), a period below MIN_PERIOD, open edges on a
+seam (the mesh's bounding sides, and planes a period apart that both hold open edges) that have
+no twin a period away (seams that do not match), and, unless a base closes it, a surface that
+does not cover the tile (its faces' signed projected area is not the tile's: a hole reaching the
+bottom) or that has open edges on no seam (holes, as a slit in a wall, which have no projected
+area).
 
 :func:`build` lays the triangles, each its own flat facet (hits projected onto its plane,
-shaded by its normal), and the triangles within ``BASE_MARGIN`` of a side again a period beyond
-it, so that a ray meeting a seam in float32 meets a triangle on one side or the other; paths
-start ``TOP_HEIGHT`` of the period above the highest point and leave when they rise above it
-again; a base lies ``BASE_GAP`` of the period under the lowest point. :func:`summary` gives the
+shaded by its normal), where they lie and moved by the period either way in x and y, each copy
+that reaches within ``BASE_MARGIN`` of the tile: parts beyond a side are so wrapped in, and a ray
+meeting a seam in float32 meets a triangle on one side or the other; paths
+start ``TOP_HEIGHT`` of the longer side above the highest point and leave when they rise above it
+again; a base lies ``BASE_GAP`` of it under the lowest point. :func:`summary` gives the
 facets' mean cosine (area-weighted: the tile's area over the surface's, for a surface over the
 tile) and RMS slope (projected-area-weighted over the facets that face up, as microfacet slope
 distributions are).
@@ -28,26 +37,48 @@ import numpy as np
 from microsim.scene import BASE_MARGIN, Scene, SceneBuilder
 from microsim.shapes import Shapes
 
-#: paths start and leave this fraction of the period above the highest point
+#: paths start and leave this fraction of the longer side above the highest point
 TOP_HEIGHT = 1e-2
-#: a base lies this fraction of the period under the lowest point
+#: a base lies this fraction of the longer side under the lowest point
 BASE_GAP = 1e-3
-#: relative tolerance of the tile's bounds, seams and projected area (of the period, its square)
+#: relative tolerance of the tile's bounds, seams and projected area (of the longer side, the tile's area)
 TOLERANCE = 1e-6
+#: shortest period traced: the tracer's offsets and Embree's float32 rays lose a tile much
+#: shorter (a white heightfield of period 3e-13 returned 8 % of its paths, tests/test_periodic_tile_physics.py)
+MIN_PERIOD = 1e-6
 #: bytes a triangle of the built scene takes (Embree's BVH, the vertices and the facet's shape)
 TRIANGLE_BYTES = 200
 
 
 @dataclass
 class Tile:
-    """One period of a surface, checked: vertices (V, 3) float64 with the tile at [0, period)^2,
-    faces (F, 3), and its facets' unit normals and areas."""
+    """One period of a surface, checked: vertices (V, 3) float64 with the tile at
+    [0, period) x [0, period_y) (``period_y`` None: square), faces (F, 3), and its facets' unit
+    normals and areas."""
 
     vertices: np.ndarray
     faces: np.ndarray
     normals: np.ndarray
     areas: np.ndarray
     period: float
+    period_y: float | None = None
+
+    def __post_init__(self):
+        if self.period_y is None:
+            self.period_y = self.period
+
+    @property
+    def sides(self) -> tuple[float, float]:
+        """(L_x, L_y)."""
+        return self.period, self.period_y
+
+    @classmethod
+    def of(cls, vertices, faces, period: float, period_y: float | None = None) -> "Tile":
+        """The tile of triangles known to be one period of a surface (no checks: :func:`checked`)."""
+        corners = vertices[faces]
+        cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        doubled = np.linalg.norm(cross, axis=1)
+        return cls(vertices, faces.astype(np.int32), cross / doubled[:, None], 0.5 * doubled, period, period_y)
 
 
 def source(config) -> tuple[str, Path]:
@@ -78,10 +109,23 @@ def remembered(config, read):
     return _LAST[key]
 
 
-def checked(key: str, vertices, faces, period: float | None, closed_by_base: bool) -> Tile:
+def require_period(key: str, period: float) -> None:
+    """ValueError, one line starting with ``key``, for a period below MIN_PERIOD."""
+    if period < MIN_PERIOD:
+        raise ValueError(f"{key}: a period of {period:.3g}, below {MIN_PERIOD:g}; scale the surface up (lengths are "
+                         "relative)")
+
+
+def checked(key: str, vertices, faces, period, closed_by_base: bool) -> Tile:
     """The tile of triangles ``vertices`` (V, 3) and ``faces`` (F, 3) after the checks of the
-    module doc; ``period`` None: the extent in x, which must equal the extent in y. ValueError,
-    one line starting with ``key``."""
+    module doc; ValueError, one line starting with ``key``.
+
+    ``period`` None: the tile is the mesh's bounds in x and y (their extents the periods), and the
+    vertices are moved so that it starts at 0. ``period`` given, one side or (L_x, L_y): the tile
+    is [0, L_x) x [0, L_y) in the vertices' own coordinates and the mesh is laid where it lies,
+    each part beyond a side wrapped in by the period (:func:`build` lays copies a period either
+    way), so no vertex may lie more than one period beyond the tile. The facets are
+    :meth:`Tile.of`'s (the one computation of every tile's normals and areas)."""
     vertices = np.asarray(vertices, np.float64)
     faces = np.asarray(faces, np.int64)
     if len(faces) == 0:
@@ -89,49 +133,87 @@ def checked(key: str, vertices, faces, period: float | None, closed_by_base: boo
     if bad := np.count_nonzero(~np.isfinite(vertices).all(axis=1)):
         raise ValueError(f"{key}: {bad} of {len(vertices)} vertices are NaN or infinite")
     low, high = vertices[:, :2].min(axis=0), vertices[:, :2].max(axis=0)
-    extent = high - low
     if period is None:
-        if abs(extent[0] - extent[1]) > TOLERANCE * extent.max():
-            raise ValueError(f"{key}: spans {extent[0]:.6g} in x and {extent[1]:.6g} in y; give the period "
-                             "(square tiles; rectangular ones are planned)")
-        period = float(extent[0])
-    if np.any(extent > period * (1 + TOLERANCE)):
-        raise ValueError(f"{key}: spans {extent[0]:.6g} x {extent[1]:.6g}, more than one period {period:.6g}")
-    vertices = vertices - np.array([low[0], low[1], 0.0])
-    corners = vertices[faces]
-    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    areas = 0.5 * np.linalg.norm(cross, axis=1)
-    if bad := np.count_nonzero(areas <= 1e-12 * period**2):
+        sides = tuple(float(extent) for extent in high - low)
+        vertices = vertices - np.array([low[0], low[1], 0.0])
+    else:
+        sides = (float(period), float(period)) if np.ndim(period) == 0 else tuple(float(side) for side in period)
+        for axis, name in ((0, "x"), (1, "y")):
+            side = sides[axis]
+            if low[axis] < -side * (1 + TOLERANCE) or high[axis] > 2 * side * (1 + TOLERANCE):
+                raise ValueError(f"{key}: spans {name} = {low[axis]:.6g} to {high[axis]:.6g}, more than one period "
+                                 f"beyond the tile [0, {side:.6g}) (a mesh with a period is laid where it lies; "
+                                 "move it, or give no period)")
+    for side in sides:
+        require_period(key, side)
+    area = sides[0] * sides[1]
+    with np.errstate(divide="ignore", invalid="ignore"):  # degenerate faces are refused next
+        tile = Tile.of(vertices, faces, *sides)
+    areas, normals = tile.areas, tile.normals
+    if bad := np.count_nonzero(areas <= 1e-12 * area):
         raise ValueError(f"{key}: {bad} of {len(faces)} faces are degenerate (zero area)")
-    normals = cross / (2.0 * areas[:, None])
     projected = float(np.sum(normals[:, 2] * areas))
-    if projected <= 0.0:
+    if projected < -TOLERANCE * area:
         raise ValueError(f"{key}: inverted orientation (the normals point down on average: mean cosine "
                          f"{projected / areas.sum():.3g}); flip the faces' winding")
-    _check_seams(key, vertices, faces, period)
-    if not closed_by_base and abs(projected - period**2) > TOLERANCE * period**2:
-        raise ValueError(f"{key}: the surface covers {projected / period**2:.6g} of the tile (holes reaching the "
+    if projected <= TOLERANCE * area:  # closed parts only: their volume is their orientation
+        volume = float(np.sum(normals[:, 2] * areas * vertices[faces][:, :, 2].mean(axis=1)))
+        if volume <= 0.0:
+            raise ValueError(f"{key}: inverted orientation (the faces cover no net area of the tile and enclose "
+                             f"a volume of {volume:.6g}: their normals point in); flip the faces' winding")
+    holes = _check_seams(key, vertices, faces, sides)
+    if not closed_by_base and abs(projected - area) > TOLERANCE * area:
+        raise ValueError(f"{key}: the surface covers {projected / area:.6g} of the tile (holes reaching the "
                          "bottom, or faces folded over); add a [base] to close it")
-    return Tile(vertices, faces.astype(np.int32), normals, areas, period)
+    if not closed_by_base and holes:
+        raise ValueError(f"{key}: {holes} open edges lie inside the tile, on no seam (holes, as a slit in a wall: "
+                         "a ray could leave through them); close them, or add a [base]")
+    return tile
 
 
-def _check_seams(key: str, vertices, faces, period: float) -> None:
-    """Every open edge (of one face) on a tile side has its twin a period away, on the opposite
-    side; open edges elsewhere are holes, which the projected-area check sees."""
+def _check_seams(key: str, vertices, faces, sides: tuple[float, float]) -> int:
+    """Every open edge (of one face) on a seam has its twin a period away (the same edge, moved
+    by the period along that axis). The seams along an axis are the mesh's two bounding sides and
+    every pair of planes a period apart that both hold open edges (the sides of a tile that does
+    not start at its bounds, as when bodies cross them); open edges elsewhere are holes: their
+    number is returned (a hole in a vertical wall has no projected area, so the projected-area
+    check does not see it). For a mesh whose bounds span one period the seams are its bounding
+    sides, and the open edges on each are those on the other."""
     edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
     unique, counts = np.unique(edges, axis=0, return_counts=True)
     open_edges = vertices[unique[counts == 1]]  # (E, 2 ends, 3)
-    step = TOLERANCE * period
+    step = TOLERANCE * max(sides)
+    on_seam = np.zeros(len(open_edges), bool)
     for axis, name in ((0, "x"), (1, "y")):
+        period = sides[axis]
         coordinate = open_edges[:, :, axis]
-        low = np.all(np.abs(coordinate) <= step, axis=1)
-        high = np.all(np.abs(coordinate - period) <= step, axis=1)
-        keys = [{_edge_key(edge, axis, step) for edge in open_edges[side]} for side in (low, high)]
-        if keys[0] != keys[1]:
-            unmatched = len(keys[0] ^ keys[1])
-            raise ValueError(f"{key}: the seams do not match across the period: {unmatched} open edges on "
-                             f"{name} = 0 or {name} = {period:.6g} have no twin on the other side (a ray could "
-                             "leak between tiles)")
+        low, high = float(vertices[:, axis].min()), float(vertices[:, axis].max())
+        planes = np.unique(np.round(coordinate[np.abs(coordinate[:, 0] - coordinate[:, 1]) <= step, 0] / step))
+        shift = round(period / step)
+        paired = [k * step for k in planes if np.any(np.abs(planes - (k + shift)) <= 1)]
+        seams = []
+        for side in [low, high, *paired, *(side + period for side in paired)]:
+            if all(abs(side - other) > step for other in seams):
+                seams.append(side)
+
+        def keys_on(side: float) -> set:
+            on = np.all(np.abs(coordinate - side) <= step, axis=1)
+            return {_edge_key(edge, axis, step) for edge in open_edges[on]}
+
+        for side in seams:
+            on_seam |= np.all(np.abs(coordinate - side) <= step, axis=1)
+
+        unmatched, named = 0, set()
+        for side in seams:
+            alone = len(keys_on(side) - keys_on(side - period) - keys_on(side + period))
+            if alone:
+                unmatched += alone
+                named |= {side, side + period if side + period <= high + step else side - period}
+        if unmatched:
+            where = " or ".join(f"{name} = {side:.6g}" for side in sorted(named))
+            raise ValueError(f"{key}: the seams do not match across the period: {unmatched} open edges on {where} "
+                             "have no twin on the other side (a ray could leak between tiles)")
+    return int(np.count_nonzero(~on_seam))
 
 
 def _edge_key(edge, axis: int, step: float) -> tuple:
@@ -142,18 +224,29 @@ def _edge_key(edge, axis: int, step: float) -> tuple:
 
 
 def summary(tile: Tile) -> dict:
-    """The tile's scene parameters for the table (module doc): period, area, mean cosine, RMS
-    slope, the heights paths start at and a base lies at."""
+    """The tile's scene parameters for the table (module doc): periods (``period`` and ``tile``
+    the x side, ``period_y``), area, mean cosine, RMS slope, the heights paths start at and a base
+    lies at (offsets in units of the longer side)."""
     z = tile.vertices[:, 2]
     up = tile.normals[:, 2] > 0.0
     weight = tile.areas[up] * tile.normals[up, 2]
     slope2 = (1.0 - tile.normals[up, 2] ** 2) / tile.normals[up, 2] ** 2
-    return {"period": tile.period, "tile": tile.period, "surface_triangles": len(tile.faces),
-            "area": float(tile.areas.sum()),
+    longer = max(tile.sides)
+    return {"period": tile.period, "period_y": tile.period_y, "tile": tile.period,
+            "surface_triangles": len(tile.faces), "area": float(tile.areas.sum()),
             "mean_cosine": float(np.sum(tile.normals[:, 2] * tile.areas) / tile.areas.sum()),
             "rms_slope": float(np.sqrt(np.sum(weight * slope2) / weight.sum())),
-            "z_top": float(z.max() + TOP_HEIGHT * tile.period), "z_bottom": float(z.min() - tile.period),
-            "base_z": float(z.min() - BASE_GAP * tile.period), "max_mesh_error": 0.0}
+            "z_top": float(z.max() + TOP_HEIGHT * longer), "z_bottom": float(z.min() - longer),
+            "base_z": float(z.min() - BASE_GAP * longer), "max_mesh_error": 0.0}
+
+
+def roughness(tile: Tile) -> tuple[float, float]:
+    """The facets' Beckmann alpha along x and y: sqrt(2 <slope^2>), the mean over the projected
+    area of the facets that face up (as :func:`summary`'s rms_slope)."""
+    up = tile.normals[:, 2] > 0.0
+    weight = tile.areas[up] * tile.normals[up, 2]
+    slopes = -tile.normals[up, :2] / tile.normals[up, 2:3]
+    return tuple(float(np.sqrt(2.0 * np.sum(weight * slopes[:, k] ** 2) / weight.sum())) for k in (0, 1))
 
 
 def for_backend(config, backend: str):
@@ -169,20 +262,20 @@ def scene_bytes(resolved: dict) -> int:
 def build(tile: Tile, resolved: dict, material, base) -> Scene:
     """The tile's triangles, each its own flat facet, and their copies within BASE_MARGIN beyond
     the sides (module doc); ``base`` (a material, or None) under it."""
-    period = tile.period
+    sides = np.array(tile.sides)
     corners = tile.vertices[tile.faces]
-    margin = BASE_MARGIN * period
+    margin = BASE_MARGIN * sides
     parts = []
     for dx in (-1, 0, 1):
         for dy in (-1, 0, 1):
-            moved = corners + np.array([dx * period, dy * period, 0.0])
+            moved = corners + np.array([dx * sides[0], dy * sides[1], 0.0])
             near = (np.all(moved[:, :, :2].max(axis=1) >= -margin, axis=1)
-                    & np.all(moved[:, :, :2].min(axis=1) <= period + margin, axis=1))
+                    & np.all(moved[:, :, :2].min(axis=1) <= sides + margin, axis=1))
             parts.append((moved[near], tile.normals[near]))
     triangles = np.concatenate([p[0] for p in parts])
     normals = np.concatenate([p[1] for p in parts])
     n = len(triangles)
-    builder = SceneBuilder(period)
+    builder = SceneBuilder(*tile.sides)
     builder.add(triangles.reshape(-1, 3).astype(np.float32), np.arange(3 * n, dtype=np.int32).reshape(n, 3),
                 np.arange(n, dtype=np.int32), Shapes.planes(triangles.mean(axis=1), normals,
                                                             float(np.sqrt(np.mean(tile.areas)))), material)

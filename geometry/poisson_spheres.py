@@ -2,7 +2,7 @@
 
 The optional ``[base]`` plane lies under every sphere, at the lowest point any mesh can reach
 (z = -depth - vertex radius): spheres rest above it and never cut it, so no hit point can be
-projected to its far side.
+projected to its far side (with flat shading, just under the realization's lowest vertex: below).
 
 Spheres of radius r = 1 may overlap. Volume fraction phi = 1 - exp(-n 4/3 pi), so the number
 density is n = -ln(1 - phi) / (4/3 pi) and the free path in the void is exponential with mean
@@ -15,8 +15,20 @@ scaled so that its area is exactly 4 pi: by Cauchy's formula its mean projected 
 pi, so the void free path keeps its exact mean l whatever the tessellation. The level is the
 coarsest whose largest distance to the true sphere is within ``mesh_error`` (unless
 ``subdivisions`` is given); that distance is recorded. Hit points are projected onto the sphere
-of the mesh's vertex radius and shaded with the exact sphere normal. Both models draw the same
-centres for the same seed, so the two can be compared realization by realization.
+of the mesh's vertex radius and shaded with the exact sphere normal (``shading = "exact"``).
+Both models draw the same centres for the same seed, so the two can be compared realization by
+realization.
+
+``shading = "flat"`` (icospheres only) lays the same icospheres as a user's periodic tile is laid
+(:mod:`geometry.periodic_tile`): the realization's spheres, all with their centre in the tile,
+are one :class:`~geometry.periodic_tile.Tile` of triangles, each its own flat facet (hits
+projected onto its plane, shaded by its normal), with the copies of the triangles that reach into
+the tile a period either way in place of the spheres' periodic images; paths start ``TOP_HEIGHT``
+of the tile above the realization's highest vertex and a base lies ``BASE_GAP`` of it under its
+lowest (``z_top``, ``z_bottom`` and ``base_z`` are therefore stored per realization, not among the
+resolved parameters). :func:`export_tile` writes the same triangles to a PLY file, and scene
+``mesh`` with ``period = tile`` and the same ``[base]`` then lays the same scene, array for array:
+the same table, bit for bit (``tests/test_mesh_from_spheres.py``).
 
 Defaults (every value used is recorded in the table's scene/ attrs):
 
@@ -68,9 +80,13 @@ from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation
 
 from microsim.physics.boolean_model import free_path, number_density
+from microsim.physics.rng import geometry_rng
 from microsim.scene import Scene, SceneBuilder
 from microsim.schema import Section
 from microsim.shapes import Shapes
+
+from . import periodic_tile
+from .periodic_tile import Tile
 
 KIND = "poisson_spheres"
 INTEGRATOR = "surface"
@@ -96,6 +112,8 @@ class Config(Section):
     tile: float | None = Field(None, ge=4.0, le=1e4, description="tile period, in radii")
     subdivisions: int | None = Field(None, ge=0, le=MAX_SUBDIVISIONS, description="icosphere level")
     mesh_error: float | None = Field(None, gt=0.0, le=0.5, description="largest mesh-to-sphere distance, in radii")
+    shading: Literal["exact", "flat"] = Field("exact", description="exact: hits shaded with the sphere's normal; "
+                                              "flat: each icosphere triangle with its own (module doc)")
 
 
 #: a realization expects at least this many spheres (or grains): a Poisson count of 10 is 0 with
@@ -108,6 +126,8 @@ def check(config) -> None:
     scene = config.scene
     if scene.subdivisions is not None and scene.mesh_error is not None:
         raise ValueError("scene.mesh_error: give either subdivisions or mesh_error, not both")
+    if scene.shading == "flat" and is_exact(scene):
+        raise ValueError("scene.shading = 'flat': for icospheres only; give subdivisions or mesh_error")
     if scene.tile is not None or scene.depth is not None:
         resolved = resolve(config)
         if resolved["expected_spheres"] < MIN_EXPECTED_OBJECTS:
@@ -194,13 +214,18 @@ def level_for(mesh_error: float) -> int:
 #: build included): 140 B a triangle on the direct backend (phi 0.1-0.6, levels 1-3), 142-165 B
 #: on embreex (levels 3 and 2); 180 B keeps a margin without refusing scenes that fit
 EXACT_SPHERE_BYTES, TRIANGLE_BYTES = 300, 180
+#: a flat-shaded icosphere triangle, laid as every periodic tile's (a facet of its own, and
+#: periodic_tile.build's float64 corners and copies while it is laid): peak resident memory rose
+#: 654 B a triangle from level 2 to level 3 (phi 0.3, tile 32, depth 10; 202 B with exact shading)
+FLAT_TRIANGLE_BYTES = 700
 
 
 def scene_bytes(resolved: dict) -> int:
     """Expected spheres (with 6 standard deviations of Poisson spread) times their size."""
     n = resolved["expected_spheres"]
     spheres = n + 6.0 * math.sqrt(n) + 1.0
-    per_sphere = resolved["triangles_per_sphere"] * TRIANGLE_BYTES or EXACT_SPHERE_BYTES
+    triangle = FLAT_TRIANGLE_BYTES if resolved["shading"] == "flat" else TRIANGLE_BYTES
+    per_sphere = resolved["triangles_per_sphere"] * triangle or EXACT_SPHERE_BYTES
     return int(spheres * per_sphere)
 
 
@@ -221,6 +246,9 @@ def resolve(config) -> dict:
         model = {"sphere_model": "icosphere", "subdivisions": level, "triangles_per_sphere": len(faces),
                  "vertex_radius": vertex_radius, "max_mesh_error": error}
     vertex_radius = model["vertex_radius"]
+    # flat: the heights are the realization's tile's (module doc), stored per realization
+    heights = {} if scene.shading == "flat" else {"base_z": -depth - vertex_radius, "z_top": vertex_radius + SLAB_MARGIN,
+                                                  "z_bottom": -depth - vertex_radius - SLAB_MARGIN}
     return {
         "kind": KIND,
         "volume_fraction": phi,
@@ -234,11 +262,10 @@ def resolve(config) -> dict:
         "tile_default": scene.tile is None,
         "tile_bias_floor": tile_bias_floor(l, max(config.illumination.theta_i_deg)),
         **model,
+        "shading": scene.shading,
         "expected_spheres": n * tile * tile * depth,
         "base": config.base.kind if config.base is not None else "none",
-        "base_z": -depth - vertex_radius,
-        "z_top": vertex_radius + SLAB_MARGIN,
-        "z_bottom": -depth - vertex_radius - SLAB_MARGIN,
+        **heights,
     }
 
 
@@ -259,16 +286,33 @@ def periodic_images(centres: np.ndarray, tile: float, reach: float):
     return np.concatenate(all_centres), np.concatenate(source)
 
 
-def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
+def draw(resolved: dict, rng: np.random.Generator):
+    """One realization's spheres, drawn from ``rng`` as every realization is: the Poisson count,
+    the centres (count, 3), uniform in the tile and the slab, then (icospheres) the rotations
+    (count, 3, 3), uniformly random; None for exact spheres, which draw none."""
     tile, depth = resolved["tile"], resolved["depth"]
     count = rng.poisson(resolved["number_density"] * tile * tile * depth)
     centres = rng.uniform((0.0, 0.0, -depth), (tile, tile, 0.0), size=(count, 3))
-    all_centres, source = periodic_images(centres, tile, resolved["vertex_radius"])
-    builder = SceneBuilder(tile)
+    if resolved["sphere_model"] == "exact":
+        return centres, None
+    return centres, Rotation.random(count, random_state=rng).as_matrix() if count else np.zeros((0, 3, 3))
+
+
+def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
+    centres, rotations = draw(resolved, rng)
+    count = len(centres)
+    if resolved["shading"] == "flat":
+        tile = tile_of(resolved, centres, rotations)
+        own = periodic_tile.summary(tile)
+        heights = {key: own[key] for key in ("z_top", "z_bottom", "base_z")}
+        scene = periodic_tile.build(tile, heights, config.material, config.base)
+        scene.info = dict(resolved, spheres=int(count), **heights, **scene.info)
+        return scene
+    all_centres, source = periodic_images(centres, resolved["tile"], resolved["vertex_radius"])
+    builder = SceneBuilder(resolved["tile"])
     if resolved["sphere_model"] == "exact":
         builder.add_spheres(all_centres, 1.0, config.material)
     else:
-        rotations = Rotation.random(count, random_state=rng).as_matrix() if count else np.zeros((0, 3, 3))
         add_icospheres(builder, all_centres, rotations[source], resolved["subdivisions"], config.material)
     if config.base is not None:
         builder.add_base_plane(resolved["base_z"], config.base)
@@ -276,12 +320,57 @@ def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
     return builder.build(resolved["z_top"], resolved["z_bottom"], info)
 
 
+def icospheres(centres, rotations, level: int):
+    """(vertices (V, 3) float64, faces (F, 3)): the icospheres of area 4 pi of ``level`` rotated by
+    ``rotations`` about ``centres``, one after the other, as every icosphere scene lays them."""
+    vertices0, faces0, _, _ = unit_icosphere(level)
+    vertices = np.einsum("sij,vj->svi", rotations, vertices0) + centres[:, None, :]
+    faces = faces0[None, :, :] + (np.arange(len(centres)) * len(vertices0))[:, None, None]
+    return vertices.reshape(-1, 3), faces.reshape(-1, 3)
+
+
 def add_icospheres(builder: SceneBuilder, centres, rotations, level: int, material) -> None:
     """Rotated icospheres of area 4 pi about ``centres``, shaded as spheres of the vertex radius."""
-    vertices0, faces0, vertex_radius, _ = unit_icosphere(level)
-    n = len(centres)
-    vertices = np.einsum("sij,vj->svi", rotations, vertices0) + centres[:, None, :]
-    faces = faces0[None, :, :] + (np.arange(n) * len(vertices0))[:, None, None]
-    face_shape = np.repeat(np.arange(n, dtype=np.int32), len(faces0))
-    builder.add(vertices.reshape(-1, 3), faces.reshape(-1, 3), face_shape,
-                Shapes.spheres(centres, 1.0, vertex_radius), material)
+    _, faces0, vertex_radius, _ = unit_icosphere(level)
+    vertices, faces = icospheres(centres, rotations, level)
+    face_shape = np.repeat(np.arange(len(centres), dtype=np.int32), len(faces0))
+    builder.add(vertices, faces, face_shape, Shapes.spheres(centres, 1.0, vertex_radius), material)
+
+
+def tile_of(resolved: dict, centres, rotations) -> Tile:
+    """The icospheres about ``centres`` (all in the tile) as one periodic tile of triangles, the
+    tile at [0, tile)^2 (spheres crossing a side reach beyond it): what ``shading = "flat"`` lays
+    and :func:`export_tile` writes."""
+    vertices, faces = icospheres(centres, rotations, resolved["subdivisions"])
+    return Tile.of(vertices, faces, resolved["tile"])
+
+
+def export_tile(config, path, realization: int = 0) -> dict:
+    """Write realization ``realization`` of the validated ``config`` (icospheres) to the PLY file
+    ``path``: its spheres, every one with its centre in the tile, as the icosphere triangles it
+    lays (:func:`tile_of`: the vertices in float64 as laid, the faces in order; :func:`write_ply`);
+    returns the ``[scene]`` section of scene ``mesh`` that traces them as ``shading = "flat"``
+    does (``period`` = the tile; give it the same ``[base]``). The realization is drawn as a run
+    draws it (``geometry_rng(run.seed, realization)``). ValueError, one line, for exact spheres."""
+    if is_exact(config.scene):
+        raise ValueError("scene.subdivisions: export_tile writes icospheres; give subdivisions or mesh_error")
+    resolved = resolve(config)
+    tile = tile_of(resolved, *draw(resolved, geometry_rng(config.run.seed, realization)))
+    write_ply(path, tile.vertices, tile.faces, f"microsim poisson_spheres realization {realization} of seed "
+                                               f"{config.run.seed}, tile {resolved['tile']:g}")
+    return {"kind": "mesh", "path": str(path), "period": resolved["tile"]}
+
+
+def write_ply(path, vertices, faces, comment: str = "") -> None:
+    """Binary PLY of ``vertices`` (V, 3) as doubles and triangles ``faces`` (F, 3): trimesh's PLY
+    writer stores float32, whose rounding would move the facets' planes; trimesh reads doubles
+    back exactly."""
+    header = ("ply\nformat binary_little_endian 1.0\n" + (f"comment {comment}\n" if comment else "")
+              + f"element vertex {len(vertices)}\nproperty double x\nproperty double y\nproperty double z\n"
+              f"element face {len(faces)}\nproperty list uchar int vertex_indices\nend_header\n")
+    packed = np.zeros(len(faces), dtype=[("count", "u1"), ("index", "<i4", (3,))])
+    packed["count"], packed["index"] = 3, faces
+    with open(path, "wb") as file:
+        file.write(header.encode("ascii"))
+        file.write(np.ascontiguousarray(vertices, "<f8").tobytes())
+        file.write(packed.tobytes())

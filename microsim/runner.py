@@ -355,11 +355,12 @@ def available_memory() -> int | None:
 def check_memory(plan: Plan, sensor: Sensor, workers: int, spawned: bool = False) -> None:
     """Refuse (PlanError, one line) a run whose :func:`memory_estimate` exceeds the free memory."""
     need, free = memory_estimate(plan, sensor, workers, spawned), available_memory()
+    size = getattr(plan.generator, "SIZE", "lower the scene's tile or depth")
     if free is not None and need > free:
         raise PlanError(f"this run needs about {need / 2**30:.3g} GiB of memory (scene "
                         f"{plan.generator.scene_bytes(plan.scene) / 2**30:.3g} GiB a tracing process, sensor.cells "
-                        f"{sensor.n_cells}) and {free / 2**30:.3g} GiB are free: lower the scene's tile or depth, "
-                        f"sensor.cells or --workers")
+                        f"{sensor.n_cells}) and {free / 2**30:.3g} GiB are free: {size}; or lower sensor.cells "
+                        "or --workers")
 
 
 def compile_tracer(plan: Plan, sensor: Sensor | None = None) -> None:

@@ -109,5 +109,17 @@ CORE = (
     *(Dataset(f"diagnostics/{name}", ("incidences",), "", _COUNT_DOCS[name]) for name in COUNT_NAMES),
     Dataset("scene/<count>", None, "", "what each realization generated (spheres, images, triangles, ...); the "
             "group's attributes hold the resolved scene parameters and the largest triangle count"),
+    *(Dataset(f"scene/{name}", None, unit, f"(realizations, {shape}): {doc} (microsim/surface_statistics.py; "
+              "masking directions: the attribute scene/statistics_directions_deg)",
+              "mesh and heightfield scenes with statistics = true")
+      for name, shape, unit, doc in (
+          ("ndf", "cells", "1/sr", "each realization's NDF D(m), averaged over each sensor cell of normals m"),
+          ("vndf", "masking directions, cells", "1/sr", "its visible NDF D_wo(m) = G1(wo, m) <wo.m> D(m) / "
+           "cos theta_o, averaged over each cell"),
+          ("g1", "masking directions", "", "the visible share of the facets' area projected towards wo"),
+          ("facing_area", "masking directions", "", "the facets' area projected towards wo, per tile area"),
+          ("g1_rays", "masking directions, cells", "", "shadow rays started on facets of normals in each cell"),
+          ("g1_free", "masking directions, cells", "", "those of them that left the surface: sum(g1_free) / "
+           "sum(g1_rays) over the realizations is G1(wo, m)"))),
 )
 

@@ -211,9 +211,19 @@ class UnitStore:
             self._lock = None
 
 
+#: the dtypes of scene-info arrays, which JSON gives back as they were (np.array of the lists)
+INFO_DTYPES = (np.float64, np.int64, np.bool_)
+
+
 def _plain(info: dict) -> dict:
-    """Scene info with numpy scalars as Python ones (JSON keeps a float's every bit)."""
-    return {k: (v.item() if isinstance(v, np.generic) else v) for k, v in info.items()}
+    """Scene info with numpy scalars and arrays as Python numbers and lists (JSON keeps a float's
+    every bit). An array of another dtype than INFO_DTYPES would come back as another one (a
+    resumed table would differ from a fresh one): a TypeError."""
+    for key, value in info.items():
+        if isinstance(value, np.ndarray) and value.dtype.type not in INFO_DTYPES:
+            raise TypeError(f"scene info {key!r}: an array of {value.dtype}; give one of {INFO_DTYPES}")
+    return {k: (v.item() if isinstance(v, np.generic) else v.tolist() if isinstance(v, np.ndarray) else v)
+            for k, v in info.items()}
 
 
 def _write_durably(path: Path, data: bytes) -> None:

@@ -21,13 +21,15 @@ def small_config(scene: str) -> str:
     return "[scene]\n" + scene.strip() + "\n" + SMALL_RUN
 
 
-def assert_run_refused(text: str, key: str, tmp_path, capsys) -> None:
-    """`microsim run` on the config ``text`` exits with 2, prints one line naming ``key`` on
-    stderr and nothing on stdout, and leaves nothing but the config in ``tmp_path``."""
+def assert_run_refused(text: str, key: str, tmp_path, capsys, *also: str) -> None:
+    """`microsim run` on the config ``text`` exits with 2, prints one line naming ``key`` (and
+    holding every string of ``also``) on stderr and nothing on stdout, and leaves nothing but the
+    config in ``tmp_path``."""
     path = tmp_path / "bad.toml"
     path.write_text(text)
     assert main(["run", str(path), "--out", str(tmp_path / "bad.h5")]) == 2
     captured = capsys.readouterr()
     lines = captured.err.strip().splitlines()
-    assert len(lines) == 1 and key in lines[0] and "Traceback" not in captured.err, captured.err
+    assert len(lines) == 1 and all(part in lines[0] for part in (key, *also)) and "Traceback" not in captured.err, \
+        captured.err
     assert captured.out == "" and list(tmp_path.iterdir()) == [path]

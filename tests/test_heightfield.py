@@ -70,3 +70,20 @@ def test_a_bad_height_array_is_refused_in_one_line(make, message, tmp_path, tmp_
 
     path = make(tmp_path_factory.mktemp("heights"))  # beside the run's directory, which must stay empty
     assert_run_refused(f'[scene]\nkind = "heightfield"\npath = "{path}"\n' + SMALL_RUN, message, tmp_path, capsys)
+
+
+def test_the_cells_are_split_along_alternating_diagonals():
+    """Cell (i, j) is split along (i, j)-(i+1, j+1) where i + j is even and along (i+1, j)-(i, j+1)
+    where it is odd (geometry.gaussian_surface: the facets' x and y slopes are then uncorrelated
+    on average)."""
+    vertices, faces = triangulate(np.zeros((2, 2)), 1.0)
+    n = 2
+
+    def diagonal(cell):  # the edge the cell's two triangles share, as grid corners
+        i, j = divmod(cell, n)
+        first, second = set(faces[cell]), set(faces[n * n + cell])
+        shared = sorted(tuple(vertices[k, :2] - [i, j]) for k in first & second)
+        return shared
+
+    assert diagonal(0) == [(0.0, 0.0), (1.0, 1.0)] and diagonal(3) == [(0.0, 0.0), (1.0, 1.0)]
+    assert diagonal(1) == [(0.0, 1.0), (1.0, 0.0)] and diagonal(2) == [(0.0, 1.0), (1.0, 0.0)]

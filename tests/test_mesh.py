@@ -99,3 +99,54 @@ def test_a_base_closes_a_tile_with_a_hole(tmp_path):
     cfg = {**mesh_config(path, albedo=1.0), "base": {"kind": "lambert", "albedo": 1.0}}
     table = tables.load(session.run(cfg, tmp_path / "hole.h5").tables[0])
     np.testing.assert_allclose(table.albedo, 1.0, rtol=0, atol=1e-12)
+
+
+def ridges(length_y: float, cells_y: int):
+    """A white-test tile invariant along y: steep triangular ridges (height 1.5, base 2) along y,
+    x in [0, 4], y in [0, length_y], ``cells_y`` cells along y."""
+    x, z = np.array([0.0, 1.0, 2.0, 3.0, 4.0]), np.array([0.0, 1.5, 0.0, 1.5, 0.0])
+    y = np.linspace(0.0, length_y, cells_y + 1)
+    vertices = np.array([[xi, yj, zi] for xi, zi in zip(x, z) for yj in y])
+    faces = []
+    for i in range(len(x) - 1):
+        for j in range(cells_y):
+            a, b = i * (cells_y + 1) + j, (i + 1) * (cells_y + 1) + j
+            faces += [[a, b, b + 1], [a, b + 1, a + 1]]
+    return vertices, np.array(faces)
+
+
+def test_a_rectangular_tile_traces_as_the_square_tile_of_the_same_surface(tmp_path):
+    """Ridges invariant along y on a 4 x 1 tile (the mesh's bounds) and on a 4 x 4 one: the paths'
+    x and z motion is the same, their y is drawn over L_y and wrapped by it, so the tables agree
+    to round-off (a tracer or a build that took L_x for L_y, or the reverse, would not: a start
+    drawn over the wrong side moves every cell by about a standard error). A white one returns
+    every path, and period_x + period_y given lay the same tile."""
+    rect, square = write(tmp_path / "rect.ply", *ridges(1.0, 1)), write(tmp_path / "square.ply", *ridges(4.0, 4))
+    theta = (0.0, 50.0, 80.0)
+    out = {}
+    for name, scene in (("rect", {"path": rect}), ("square", {"path": square}),
+                        ("given", {"path": rect, "period_x": 4.0, "period_y": 1.0})):
+        cfg = mesh_config(**scene, theta=theta)
+        cfg["illumination"]["phi_i_deg"] = [30.0]
+        out[name] = tables.load(session.run(cfg, tmp_path / f"{name}.h5").tables[0])
+    rect_t, square_t = out["rect"], out["square"]
+    assert rect_t.scene["period"] == 4.0 and rect_t.scene["period_y"] == 1.0
+    assert square_t.scene["period_y"] == 4.0
+    for name in ("brdf", "albedo"):
+        a, b = rect_t.arrays[name], square_t.arrays[name]
+        error = np.hypot(rect_t.arrays[f"{name}_stderr"], square_t.arrays[f"{name}_stderr"])
+        print(f"{name}: largest |rect - square| {np.max(np.abs(a - b) / error):.3g} of the combined error")
+        assert np.all(np.abs(a - b) <= 0.25 * error + 1e-12), np.max(np.abs(a - b) / error)
+    assert np.array_equal(out["given"].arrays["brdf"], rect_t.arrays["brdf"])
+    white = tables.load(session.run(mesh_config(rect, albedo=1.0, theta=(0.0, 60.0, 89.0)), tmp_path / "w.h5").tables[0])
+    assert np.all(np.abs(white.albedo + white.truncated - 1.0) <= 1e-12) and np.all(white.transmitted == 0.0)
+    assert np.all(white.arrays["albedo_order"][:, 1] > 0.01)  # inter-reflections between the ridges
+
+
+@pytest.mark.parametrize("keys, key", [("period_x = 4.0", "scene.period_y"), ("period_y = 1.0", "scene.period_x"),
+                                       ("period = 4.0\nperiod_x = 4.0\nperiod_y = 1.0", "scene.period")])
+def test_half_a_rectangular_period_is_refused_in_one_line(keys, key, tmp_path, tmp_path_factory, capsys):
+    from tests.refusals import SMALL_RUN, assert_run_refused
+
+    path = write(tmp_path_factory.mktemp("rect") / "rect.ply", *ridges(1.0, 1))
+    assert_run_refused(f'[scene]\nkind = "mesh"\npath = "{path}"\n{keys}\n' + SMALL_RUN, key, tmp_path, capsys)
