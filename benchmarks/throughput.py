@@ -1,9 +1,9 @@
-"""Throughput of both Embree backends against raw Embree, on the sphere scenes phi = 0.1, 0.3, 0.6
-and a micrograin field.
+"""Throughput of both Embree backends against raw Embree, on the sphere scenes phi = 0.1, 0.3, 0.6,
+a micrograin field and a Gaussian heightfield.
 
-For each scene (runs/spheres_phi0XX.toml, runs/micrograins_fig18_conductor_on_lambert.toml: its
-first realization and incidence, --scenes picks others), measured side by side in one run, best
-of --repeats:
+For each scene (runs/spheres_phi0XX.toml, runs/micrograins_fig18_conductor_on_lambert.toml,
+runs/gaussian_alpha08_lambert.toml: its first realization and incidence, --scenes picks others),
+measured side by side in one run, best of --repeats:
 
 1. old backend (``embreex``: one embreex.run per segment of every live path) on the spheres
    tessellated at the former default (mesh error 0.01, icosphere level 2): one thread traces
@@ -21,13 +21,32 @@ of --repeats:
    (Order matters: the same rays shuffled run 1.5 times slower in Embree.) On a micrograin
    scene, also ``direct_ratio_absorbing``: that ratio with grains and base absorbing, the
    kernel's floor (a path is its start, one query and one absorption).
-3. whole runs, builds included (--run-paths per incidence, 8 realizations, all 4 incidences):
-   old backend with 1 and 2 worker processes, new backend with 1 and 2 threads, alternated.
+3. whole runs, builds included (--run-paths per incidence, 8 realizations, all the run's
+   incidences: 4 on the spheres and grains, 5 on the heightfield): old backend with 1 and 2
+   worker processes, new backend with 1 and 2 threads, alternated.
+
+A triangle scene (``kind = "heightfield"``, or ``"mesh"`` given with --scenes) has nothing to
+tessellate: both backends trace the same realization's triangles (``spheres`` is 0), so the raw
+embreex and raw direct figures are Embree on the same triangles, in the wavefront's batches and
+in the kernel's order. The heightfield (label ``gaussian alpha = 0.8, lambert``: a periodic
+Gaussian surface of Beckmann alpha 0.8, about 100 000 triangles with the default tile,
+Lambertian albedo 0.8 with multiple scattering, drawn afresh each realization) is traced with
+``statistics`` off (a conductor run's NDF and masking measurements are shadow rays at scene
+generation, not tracing); it also reports ``direct_ratio_absorbing``. Its time outside Embree a
+segment grows with the triangles (the per-facet shape data read at each hit): 14, 24, 69 and
+153 ns a segment at 2 300, 8 700, 35 000 and 103 000 triangles (tile 4, 8, 16 and the default),
+ratio 0.89, 0.83, 0.71 and 0.58, against 73 ns and 0.78 on exact spheres phi = 0.3 in the same
+process (load 1.5 on 2 cores). Its whole runs generate a surface a realization (0.3 to 0.45 s,
+once per realization on any number of threads, in parallel on 2 workers): there builds weigh as
+much as tracing.
 
 Prints a table and writes benchmarks/out/throughput.png; with --json, one JSON object on the
 last line. Its top-level keys ``segments_per_s``, ``raw_rays_per_s``, ``ratio``,
 ``speedup_2_workers`` and ``outside_embree_ns_per_segment`` are those of the old backend on
-phi = 0.3, as before; ``scenes`` holds every figure per scene. About 10 minutes on 2 cores.
+phi = 0.3, as before; ``scenes`` holds every figure per scene. About 10 minutes on 2 cores
+before the heightfield, which adds about a fifth of what phi = 0.3 takes (95 against 484 s,
+load about 2); ``--scenes spheres_phi010 spheres_phi030 spheres_phi060
+micrograins_fig18_conductor_on_lambert`` leaves it out.
 
 The replay writes its hits into arrays written once before the clock starts. Into fresh arrays
 it would also time the first writes to their pages: 10 ns a ray on the micrograin scene (95
@@ -59,6 +78,7 @@ from microsim.sensor import Sensor
 ROOT = Path(__file__).resolve().parent.parent
 SPHERE_RUNS = ("spheres_phi010", "spheres_phi030", "spheres_phi060")
 MICROGRAIN_RUN = "micrograins_fig18_conductor_on_lambert"
+HEIGHTFIELD_RUN = "gaussian_alpha08_lambert"
 OUT = Path(__file__).resolve().parent / "out"
 FORMER_MESH_ERROR = 0.01
 
@@ -85,7 +105,15 @@ def embreex_run(scene):
     return lambda o, d, dists: committed.run(o, d, dists=dists, output=1)
 
 
+def tessellated(cfg) -> bool:
+    """Whether the scene has spheres that the old backend traces tessellated (``mesh_error``): a
+    triangle scene (heightfield, mesh) is the same triangles on both backends."""
+    return "mesh_error" in type(cfg.scene).model_fields
+
+
 def realization(cfg, **scene_keys):
+    if not tessellated(cfg):
+        scene_keys = {}  # nothing to tessellate: its triangles as they are
     cfg = cfg.model_copy(update={"scene": cfg.scene.model_copy(update=scene_keys)})
     plan = runner.Plan.from_config(cfg)
     return cfg, plan, plan.generator.generate(plan.scene, cfg, geometry_rng(cfg.run.seed, 0))
@@ -131,7 +159,7 @@ def measure_scene(cfg, paths: int, repeats: int) -> dict:
     """Figures 1 and 2 of the module docstring for one config."""
     sensor = Sensor.build(cfg.sensor.cells)
     _, plan, mesh = realization(cfg, mesh_error=FORMER_MESH_ERROR)
-    _, _, exact = realization(cfg, mesh_error=None, subdivisions=None)
+    exact = realization(cfg, mesh_error=None, subdivisions=None)[2] if tessellated(cfg) else mesh
     wi = plan.incidence_direction(0)
     out = {"triangles": mesh.n_triangles, "spheres": len(exact.spheres)}
     embreex = embreex_run(mesh)
@@ -172,7 +200,7 @@ def measure_scene(cfg, paths: int, repeats: int) -> dict:
 def absorbing_floor(cfg, paths: int, repeats: int) -> float:
     """``direct_ratio_per_thread`` of the same scene with every surface absorbing: a path is its
     start, one query and one absorption, the least the kernel does around a query."""
-    data = cfg.model_dump()
+    data = cfg.model_dump(exclude_unset=True)  # the keys given (a heightfield refuses some defaults given)
     data["material"] = {"kind": "absorber"}
     if "base" in data:
         data["base"] = {"kind": "absorber"}
@@ -205,9 +233,20 @@ def measure_runs(cfg, run_paths: int, repeats: int) -> dict:
     return {f"run_paths_per_s_{name}": paths / seconds for name, seconds in best.items()}
 
 
+def load(run: str, run_paths: int):
+    """runs/RUN.toml with --run-paths and 8 realizations; a heightfield's NDF and masking
+    measurements (``statistics``: shadow rays at scene generation, not tracing) turned off."""
+    overrides = {"run.paths": run_paths, "run.realizations": 8}
+    cfg = config_module.load(ROOT / "runs" / f"{run}.toml", overrides)
+    if cfg.scene.kind == "heightfield" and cfg.scene.statistics:
+        cfg = config_module.load(ROOT / "runs" / f"{run}.toml", {**overrides, "scene.statistics": False})
+    return cfg
+
+
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenes", nargs="+", default=[*SPHERE_RUNS, MICROGRAIN_RUN], help="runs/NAME.toml")
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--scenes", nargs="+", default=[*SPHERE_RUNS, MICROGRAIN_RUN, HEIGHTFIELD_RUN],
+                        help="runs/NAME.toml (default: %(default)s)")
     parser.add_argument("--paths", type=int, default=200_000, help="paths of the traced batch")
     parser.add_argument("--run-paths", type=int, default=400_000, help="paths per incidence of the whole runs")
     parser.add_argument("--repeats", type=int, default=5, help="best of this many, for every figure")
@@ -215,9 +254,10 @@ def main():
     args = parser.parse_args()
     scenes = {}
     for run in args.scenes:
-        cfg = config_module.load(ROOT / "runs" / f"{run}.toml", {"run.paths": args.run_paths, "run.realizations": 8})
+        start = time.perf_counter()
+        cfg = load(run, args.run_paths)
         figures = measure_scene(cfg, args.paths, args.repeats)
-        if cfg.scene.kind == "micrograins":
+        if cfg.scene.kind in ("micrograins", "heightfield"):
             figures["direct_ratio_absorbing"] = absorbing_floor(cfg, args.paths, args.repeats)
         figures.update(measure_runs(cfg, args.run_paths, args.repeats))
         figures["speedup_2_workers"] = figures["run_paths_per_s_old_2_workers"] / figures["run_paths_per_s_old_1_worker"]
@@ -227,6 +267,7 @@ def main():
         label = scene_label(run)
         scenes[label] = figures
         report(label, figures)
+        print(f"  ({time.perf_counter() - start:.0f} s for this scene)")
     chart(scenes)
     if args.json:
         main_scene = scenes.get("phi = 0.30") or next(iter(scenes.values()))
@@ -238,18 +279,26 @@ def main():
 
 
 def scene_label(run: str) -> str:
-    """'phi = 0.30' for runs/spheres_phi030.toml, else the run's name."""
+    """'phi = 0.30' for runs/spheres_phi030.toml, 'gaussian alpha = 0.8, lambert' for
+    runs/gaussian_alpha08_lambert.toml, else the run's name."""
     if run.startswith("spheres_phi"):
         digits = run[len("spheres_phi"):]
         return f"phi = {digits[0]}.{digits[1:]}"
+    if run.startswith("gaussian_alpha") and "_" in run[len("gaussian_alpha"):]:
+        digits, rest = run[len("gaussian_alpha"):].split("_", 1)
+        return f"gaussian alpha = {digits[0]}.{digits[1:]}, {rest}"
     return run
 
 
 def report(label: str, f: dict) -> None:
-    print(f"{label}: {f['spheres']} spheres (exact) / {f['triangles']} triangles (tessellated), "
-          f"{f['new_segments']} / {f['old_segments']} segments")
+    if f["spheres"]:
+        print(f"{label}: {f['spheres']} spheres (exact) / {f['triangles']} triangles (tessellated), "
+              f"{f['new_segments']} / {f['old_segments']} segments")
+    else:
+        print(f"{label}: {f['triangles']} triangles (both backends), "
+              f"{f['new_segments']} / {f['old_segments']} segments")
     print(f"  raw Embree          embreex {f['raw_embreex_rays_per_s'] / 1e6:6.3f} M rays/s (triangles)   "
-          f"direct {f['raw_direct_rays_per_s'] / 1e6:6.3f} M rays/s (spheres)")
+          f"direct {f['raw_direct_rays_per_s'] / 1e6:6.3f} M rays/s ({'spheres' if f['spheres'] else 'triangles'})")
     print(f"  old backend 1 thr   {f['old_segments_per_s'] / 1e6:6.3f} M segments/s, {f['old_paths_per_s'] / 1e3:7.1f} k paths/s,"
           f" ratio {f['old_ratio']:.3f}, outside Embree {f['old_outside_embree_ns_per_segment']:.1f} ns/segment")
     for t in (1, 2):
@@ -278,7 +327,8 @@ def chart(scenes: dict) -> None:
     x = np.arange(len(phis))
     fig, (left, right) = plt.subplots(1, 2, figsize=(13, 4.5))
     bars = [("raw embreex (triangles)", "raw_embreex_rays_per_s"), ("old backend, 1 thread", "old_segments_per_s"),
-            ("raw direct (spheres)", "raw_direct_rays_per_s"), ("new backend, 1 thread", "new_segments_per_s_1_threads"),
+            ("raw direct (spheres; heightfield: triangles)", "raw_direct_rays_per_s"),
+            ("new backend, 1 thread", "new_segments_per_s_1_threads"),
             ("new backend, 2 threads", "new_segments_per_s_2_threads")]
     for k, (label, key) in enumerate(bars):
         left.bar(x + (k - 2) * 0.16, [scenes[p][key] / 1e6 for p in phis], 0.16, label=label)
@@ -292,7 +342,7 @@ def chart(scenes: dict) -> None:
     right.set_ylabel("k paths / s (whole runs, builds included)")
     right.set_title("whole runs")
     for ax in (left, right):
-        ax.set_xticks(x, [p.replace("micrograins_", "micrograins\n") for p in phis], fontsize=8)
+        ax.set_xticks(x, [p.replace("micrograins_", "micrograins\n").replace(", ", "\n") for p in phis], fontsize=8)
         ax.legend(fontsize=8, loc="upper left", ncol=2)
     fig.tight_layout()
     fig.savefig(OUT / "throughput.png", dpi=110)
