@@ -15,8 +15,9 @@ Two sources of heights:
 
 The period is n ``pixel``, and the grid wraps (the sample after the last is the first). Each
 grid cell is two triangles (:func:`triangulate`), each its own flat facet: a heightfield is a
-:mod:`geometry.periodic_tile` like a user's mesh, checked, laid and summarized as it is; a
-generated one records in ``scene/`` per realization what a file's records once (area,
+:mod:`geometry.periodic_tile` like a user's mesh, laid and summarized as it is (not run through
+the mesh checks: a periodic grid is a surface over the tile by construction); a generated one
+records in ``scene/`` per realization what a file's records once (area,
 mean_cosine, rms_slope, z_top, ...). With ``statistics = true`` each realization's measured
 NDF, visible NDF and G1 are stored too (:mod:`microsim.surface_statistics`).
 """
@@ -31,8 +32,8 @@ import numpy as np
 import pydantic
 from pydantic import Field
 
-from microsim.physics import distributions as nd
 from microsim import surface_statistics
+from microsim.physics import distributions as nd
 from microsim.scene import Scene
 from microsim.schema import Section
 
@@ -230,8 +231,8 @@ def _generated(config) -> dict:
     period = samples * pixel
     return {"kind": KIND, "generator": scene.generator, "roughness_x": alpha_x, "roughness_y": alpha_y,
             "correlation_length": scene.correlation, **field, "pixel": pixel, "samples": samples,
-            "samples_per_correlation": scene.correlation / pixel, "period": period, "tile": period,
-            "tile_default": scene.tile is None, "tile_bias_floor": floor, "surface_triangles": 2 * samples**2,
+            "samples_per_correlation": scene.correlation / pixel, "period": period, "period_y": period,
+            "tile": period, "tile_default": scene.tile is None, "tile_bias_floor": floor, "surface_triangles": 2 * samples**2,
             "max_mesh_error": 0.0}
 
 

@@ -13,16 +13,21 @@ the sensor's cells (here cells of facet normals m, not of exit directions):
   masking G1(wo, m) of facets of normal m, which Smith's model says does not depend on m and the
   V-cavity model says does.
 - ``g1``: the visible share of the projected area facing wo (for a heightfield, the sum of vndf
-  times the cells' solid angle, times cos(theta_o) / facing_area). On any surface over the tile every line from wo
-  meets the surface once, so this is exactly cos(theta_o) over the facing projected area per tile
-  area: a check of the shadow rays with nothing to fit, which Smith's and the V-cavity G1 both
-  satisfy (Heitz 2014, §4); the models differ in vndf.
+  times the cells' solid angle, times cos(theta_o) / facing_area). On any surface over the tile
+  every line from wo meets the surface once, so this is exactly cos(theta_o) over the facing
+  projected area per tile area: a check of the shadow rays with nothing to fit, which Smith's and
+  the V-cavity G1 both satisfy (Heitz 2014, §4); the models differ in vndf.
+- ``facing_area``: that projected area, the sum of area <wo.m> over the facets per tile area, the
+  integral of <wo.m> D(m) (cos(theta_o) (1 + Lambda(wo)) in Smith's model).
+- ``g1_rays``, ``g1_free``: the shadow rays started on facets of normals in each cell, and those
+  that left: summed over realizations, their ratio is G1(wo, m) with no model in it.
 
 A shadow ray starts off its facet as the tracer's scattered rays do (the clearance of
 microsim.integrators.surface_transport: OFFSET_SIZE of the facets' size, OFFSET_SPACINGS float32
-spacings of the coordinates). Shadow rays cross the periodic tile in segments, each to the nearer of the top z_top and the
-tile side, and go on from the opposite side (the tracer's wrapping), tested with Embree's
-occlusion query on the scene's triangles (with their copies beyond the sides).
+spacings of the coordinates). Shadow rays cross the periodic tile in segments, each to the nearer
+of the top z_top and the tile side, and go on from the opposite side (the tracer's wrapping),
+tested with Embree's occlusion query on the scene's triangles (with their copies beyond the
+sides).
 """
 
 from __future__ import annotations
