@@ -51,8 +51,9 @@ MAX_SAMPLES = 4096
 #: keys of a generated surface only, and of a height file only
 GENERATOR_KEYS = ("roughness", "roughness_x", "roughness_y", "rms_slope", "correlation_length", "tile")
 FILE_KEYS = ("height_scale",)
-#: a heightfield's facets are a pixel across: its copies beyond the sides add at most this share
-#: of its triangles (those within BASE_MARGIN and one pixel of a side)
+#: a heightfield's facets are a pixel across: its copies beyond the sides (those within
+#: BASE_MARGIN and one pixel of a side) add at most this share of its triangles on grids of 64
+#: samples a side or more (more on smaller grids, whose few triangles weigh nothing in memory)
 COPIES_SHARE = 0.1
 
 
