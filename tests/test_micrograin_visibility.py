@@ -28,7 +28,8 @@ shadow rays are traced with :meth:`microsim.embree.Scene.occluded` and compared 
 Shadow rays in a periodic tile. The scene holds one tile [0, L)^2 and the images of grains that
 cross its sides, so a ray is traced in segments: from its origin to the nearer of the plane
 z = TOP above every grain (reached unblocked: free) and the side of the tile (reached
-unblocked: it goes on from the opposite side), vectorised over all rays, a few passes.
+unblocked: it goes on from the opposite side), vectorised over all rays: the shadow rays of
+microsim.surface_statistics.leaves, which measures the masking of mesh and heightfield scenes.
 
 Sampling. The G1 points of a realization are drawn in proportion to its number of grains, so
 that every grain of every realization weighs the same (the Palm distribution the model
@@ -69,6 +70,7 @@ from microsim import config, embree, shapes
 from microsim.physics.boolean_model import grain_density, grain_extinction, unit_space_direction_array
 from microsim.frames import direction
 from microsim.models import micrograin_geometry as geo
+from microsim.surface_statistics import leaves
 
 REALIZATIONS = 64
 #: points kept (in the void) per realization per G1 case, on average
@@ -108,7 +110,6 @@ VOID_MARGIN = 1e-4
 BASE_LIFT = 1e-6
 #: shadow rays end on this plane, above every grain (unit vertical semi-axis)
 TOP = 1.0 + 1e-3
-MAX_PASSES = 8
 
 
 def unit(theta_deg, phi_deg):
@@ -155,39 +156,9 @@ class Field:
         return d * d + p[:, 2] ** 2 < 1.0
 
     def free(self, origins, w):
-        """Whether the ray from each origin (n, 3) towards w (3,), w.z > 0, leaves the layer unblocked."""
-        tile = self.tile
-        p = np.array(origins, dtype=np.float64)
-        p[:, :2] = np.mod(p[:, :2], tile)
-        out = np.zeros(len(p), bool)
-        active = np.arange(len(p))
-        for _ in range(MAX_PASSES):
-            if len(active) == 0:
-                return out
-            q = p[active]
-            t_top = (TOP - q[:, 2]) / w[2]
-            t_axis = []  # distance to the tile side along x and along y
-            for k in range(2):
-                if w[k] > 0.0:
-                    t_axis.append((tile - q[:, k]) / w[k])
-                elif w[k] < 0.0:
-                    t_axis.append(-q[:, k] / w[k])
-                else:
-                    t_axis.append(np.full(len(q), np.inf))
-            t_side = np.minimum(*t_axis)
-            t_far = np.minimum(t_top, t_side)
-            blocked = self.embree.occluded(q, np.broadcast_to(w, q.shape), t_far)
-            leaves = t_top <= t_side
-            out[active[~blocked & leaves]] = True
-            going = ~blocked & ~leaves
-            q = q[going] + t_far[going, None] * w
-            q[:, :2] = np.mod(q[:, :2], tile)
-            for k in range(2):  # the side it crossed: continue from the opposite one
-                if w[k] != 0.0:
-                    q[t_axis[k][going] <= t_far[going], k] = 0.0 if w[k] > 0.0 else tile
-            p[active[going]] = q
-            active = active[going]
-        raise AssertionError(f"shadow rays still in the layer after {MAX_PASSES} tile crossings")
+        """Whether the ray from each origin (n, 3) towards w (3,), w.z > 0, leaves the layer unblocked
+        (surface_statistics.leaves: segments to the top or the tile side, wrapped)."""
+        return leaves(self.embree.occluded, origins, w, (self.tile, self.tile), TOP)
 
     def grain_points(self, rng, attempts, h, w):
         """Points at unit-space height h on the grains, facing w, in no other grain, offset OFFSET."""
