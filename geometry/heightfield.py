@@ -14,7 +14,8 @@ Two sources of heights:
   correlation_length / SAMPLES_PER_CORRELATION) and ``tile`` (default: gaussian_surface.default_tile).
 
 The period is n ``pixel``, and the grid wraps (the sample after the last is the first). Each
-grid cell is two triangles (:func:`triangulate`), each its own flat facet: a heightfield is a
+grid cell is two triangles (:func:`triangulate`), each its own flat facet or, with ``shading =
+"smooth"``, shaded by its vertex normals interpolated: a heightfield is a
 :mod:`geometry.periodic_tile` like a user's mesh, laid and summarized as it is (not run through
 the mesh checks: a periodic grid is a surface over the tile by construction); a generated one
 records in ``scene/`` per realization what a file's records once (area,
@@ -82,6 +83,7 @@ class Config(Section):
                                              "default 1)")
     tile: float | None = Field(None, gt=0.0, le=1e9, description="generated: the period (default: 16 correlation "
                                "lengths, longer where grazing rays need it; whole pixels)")
+    shading: Literal["flat", "smooth"] = Field("flat", description=periodic_tile.SHADING_DESCRIPTION)
     statistics: bool = surface_statistics.statistics_key()
     statistics_rays: int | None = surface_statistics.rays_key()
 
@@ -230,7 +232,7 @@ def _generated(config) -> dict:
         raise ValueError(f"scene.tile = {samples * pixel:g}: {samples} samples of scene.pixel = {pixel:g} a side; "
                          f"accepted: 2 to {MAX_SAMPLES}")
     period = samples * pixel
-    return {"kind": KIND, "generator": scene.generator, "roughness_x": alpha_x, "roughness_y": alpha_y,
+    return {"kind": KIND, "generator": scene.generator, "shading": scene.shading, "roughness_x": alpha_x, "roughness_y": alpha_y,
             "correlation_length": scene.correlation, **field, "pixel": pixel, "samples": samples,
             "samples_per_correlation": scene.correlation / pixel, "period": period, "period_y": period,
             "tile": period, "tile_default": scene.tile is None, "tile_bias_floor": floor, "surface_triangles": 2 * samples**2,
@@ -244,13 +246,14 @@ def resolve(config) -> dict:
     if scene.generator is not None:
         return {**_generated(config), **statistics}
     tile, digest = load(config)
-    return {"kind": KIND, "path": scene.path, "pixel": file_pixel(scene), "height_scale": scene.height_factor,
+    return {"kind": KIND, "path": scene.path, "shading": scene.shading, "pixel": file_pixel(scene),
+            "height_scale": scene.height_factor,
             "sha256": digest, **periodic_tile.summary(tile), **statistics}
 
 
 def scene_bytes(resolved: dict) -> int:
     """The triangles: each a pixel across, so that few are copied beyond the sides (COPIES_SHARE)."""
-    return int((1.0 + COPIES_SHARE) * resolved["surface_triangles"] * periodic_tile.TRIANGLE_BYTES) + 4096
+    return int((1.0 + COPIES_SHARE) * resolved["surface_triangles"] * periodic_tile.triangle_bytes(resolved)) + 4096
 
 
 def realize(resolved: dict, rng: np.random.Generator) -> Tile:

@@ -9,8 +9,10 @@ in by the period, so closed bodies may cross the sides (a Boolean-sphere realiza
 :func:`geometry.poisson_spheres.export_tile`); seams are matched a period apart wherever the
 mesh's bounds put them. It is checked, laid and summarized as
 every periodic tile is (:mod:`geometry.periodic_tile`: refusals of meshes through which a ray
-could leak, flat facets, copies beyond the sides, an optional ``[base]`` under it); every
-triangle is shaded by its own normal (``shading = "flat"``; interpolated normals are planned).
+could leak, facets, copies beyond the sides, an optional ``[base]`` under it); every
+triangle is shaded by its own normal (``shading = "flat"``) or by its vertex normals
+interpolated (``"smooth"``: :func:`geometry.periodic_tile.corner_normals`; the file's own normals
+are not read).
 The table also records the file's SHA-256; with ``statistics = true``, every realization's
 measured NDF, visible NDF and G1 (:mod:`microsim.surface_statistics`).
 """
@@ -51,8 +53,7 @@ class Config(Section):
     period_y: float | None = Field(None, gt=0.0, le=1e9, description="a rectangular tile's side along y (with "
                                    "period_x)")
     scale: float = Field(1.0, gt=0.0, le=1e9, description="factor applied to the mesh's coordinates")
-    shading: Literal["flat"] = Field("flat", description="flat: every triangle shaded by its own normal "
-                                     "(interpolated vertex normals are planned)")
+    shading: Literal["flat", "smooth"] = Field("flat", description=periodic_tile.SHADING_DESCRIPTION)
     statistics: bool = surface_statistics.statistics_key()
     statistics_rays: int | None = surface_statistics.rays_key()
 

@@ -17,7 +17,8 @@ bottom) or that has open edges on no seam (holes, as a slit in a wall, which hav
 area).
 
 :func:`build` lays the triangles, each its own flat facet (hits projected onto its plane,
-shaded by its normal), where they lie and moved by the period either way in x and y, each copy
+shaded by its normal, or with ``shading = "smooth"`` by its corners' normals interpolated:
+:func:`corner_normals`), where they lie and moved by the period either way in x and y, each copy
 that reaches within ``BASE_MARGIN`` of the tile: parts beyond a side are so wrapped in, and a ray
 meeting a seam in float32 meets a triangle on one side or the other; paths
 start ``TOP_HEIGHT`` of the longer side above the highest point and leave when they rise above it
@@ -35,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from microsim.scene import BASE_MARGIN, Scene, SceneBuilder
-from microsim.shapes import Shapes
+from microsim.shapes import N_PARAMS, SMOOTH_PARAMS, Shapes
 
 #: paths start and leave this fraction of the longer side above the highest point
 TOP_HEIGHT = 1e-2
@@ -46,8 +47,13 @@ TOLERANCE = 1e-6
 #: shortest period traced: the tracer's offsets and Embree's float32 rays lose a tile much
 #: shorter (a white heightfield of period 3e-13 returned 8 % of its paths, tests/test_periodic_tile_physics.py)
 MIN_PERIOD = 1e-6
-#: bytes a triangle of the built scene takes (Embree's BVH, the vertices and the facet's shape)
+#: bytes a triangle of the built scene takes (Embree's BVH, the vertices and the facet's shape),
+#: flat; a smooth one's shape row is SMOOTH_PARAMS - N_PARAMS floats wider
 TRIANGLE_BYTES = 200
+SMOOTH_SHADING = "smooth"
+#: the ``shading`` key of every periodic tile's scene
+SHADING_DESCRIPTION = ("flat: every triangle shaded by its own normal; smooth: by its vertex normals interpolated "
+                       "(vertex normals: the faces' area-weighted normals, averaged across the seams)")
 
 
 @dataclass
@@ -254,16 +260,50 @@ def for_backend(config, backend: str):
     return config, ""
 
 
+def triangle_bytes(resolved: dict) -> int:
+    """Bytes a triangle of the built scene takes, by its shading."""
+    wider = SMOOTH_PARAMS - N_PARAMS if resolved.get("shading") == SMOOTH_SHADING else 0
+    return TRIANGLE_BYTES + 8 * wider
+
+
 def scene_bytes(resolved: dict) -> int:
     """The triangles and their copies beyond the sides (at most all of them, 9 times)."""
-    return 9 * resolved["surface_triangles"] * TRIANGLE_BYTES + 4096
+    return 9 * resolved["surface_triangles"] * triangle_bytes(resolved) + 4096
+
+
+def corner_normals(tile: Tile) -> np.ndarray:
+    """(F, 3, 3): the unit normal at each corner of each face, for smooth shading: the sum of the
+    area vectors of every face at the corner's vertex, vertices that coincide (to TOLERANCE of
+    the longer side) once folded into the tile counted as one, so that a seam's two sides share
+    their normals. A corner whose faces' area vectors cancel (the two sides of a sheet) takes its
+    own face's normal."""
+    sides = np.array(tile.sides)
+    step = TOLERANCE * max(sides)
+    keys = np.round(tile.vertices / step).astype(np.int64)
+    for axis in (0, 1):
+        keys[:, axis] %= round(sides[axis] / step)
+    welded = np.unique(keys, axis=0, return_inverse=True)[1].reshape(-1)
+    area_vectors = tile.normals * tile.areas[:, None]
+    total = np.zeros((welded.max() + 1, 3))
+    magnitude = np.zeros(welded.max() + 1)
+    for corner in range(3):
+        np.add.at(total, welded[tile.faces[:, corner]], area_vectors)
+        np.add.at(magnitude, welded[tile.faces[:, corner]], tile.areas)
+    norm = np.linalg.norm(total, axis=1)
+    summed = total[welded[tile.faces]]  # (F, 3, 3)
+    length = norm[welded[tile.faces]][:, :, None]
+    cancelled = norm[welded[tile.faces]] <= 1e-9 * magnitude[welded[tile.faces]]
+    return np.where(cancelled[:, :, None], tile.normals[:, None, :], summed / np.where(length > 0.0, length, 1.0))
 
 
 def build(tile: Tile, resolved: dict, material, base) -> Scene:
-    """The tile's triangles, each its own flat facet, and their copies within BASE_MARGIN beyond
-    the sides (module doc); ``base`` (a material, or None) under it."""
+    """The tile's triangles, each its own facet, and their copies within BASE_MARGIN beyond
+    the sides (module doc); flat facets, or smooth ones where ``resolved["shading"]`` says so;
+    ``base`` (a material, or None) under it."""
     sides = np.array(tile.sides)
     corners = tile.vertices[tile.faces]
+    smooth = resolved.get("shading") == SMOOTH_SHADING
+    shading = corner_normals(tile) if smooth else tile.normals
     margin = BASE_MARGIN * sides
     parts = []
     for dx in (-1, 0, 1):
@@ -271,14 +311,16 @@ def build(tile: Tile, resolved: dict, material, base) -> Scene:
             moved = corners + np.array([dx * sides[0], dy * sides[1], 0.0])
             near = (np.all(moved[:, :, :2].max(axis=1) >= -margin, axis=1)
                     & np.all(moved[:, :, :2].min(axis=1) <= sides + margin, axis=1))
-            parts.append((moved[near], tile.normals[near]))
+            parts.append((moved[near], shading[near]))
     triangles = np.concatenate([p[0] for p in parts])
     normals = np.concatenate([p[1] for p in parts])
     n = len(triangles)
+    size = float(np.sqrt(np.mean(tile.areas)))
+    shapes = Shapes.smooth_triangles(triangles, normals, size) if smooth else \
+        Shapes.planes(triangles.mean(axis=1), normals, size)
     builder = SceneBuilder(*tile.sides)
     builder.add(triangles.reshape(-1, 3).astype(np.float32), np.arange(3 * n, dtype=np.int32).reshape(n, 3),
-                np.arange(n, dtype=np.int32), Shapes.planes(triangles.mean(axis=1), normals,
-                                                            float(np.sqrt(np.mean(tile.areas)))), material)
+                np.arange(n, dtype=np.int32), shapes, material)
     if base is not None:
         builder.add_base_plane(resolved["base_z"], base)
     return builder.build(resolved["z_top"], resolved["z_bottom"], {"copies": n - len(tile.faces)})

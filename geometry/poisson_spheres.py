@@ -22,7 +22,8 @@ realization.
 ``shading = "flat"`` (icospheres only) lays the same icospheres as a user's periodic tile is laid
 (:mod:`geometry.periodic_tile`): the realization's spheres, all with their centre in the tile,
 are one :class:`~geometry.periodic_tile.Tile` of triangles, each its own flat facet (hits
-projected onto its plane, shaded by its normal), with the copies of the triangles that reach into
+projected onto its plane, shaded by its normal; ``"smooth"``: by its vertex normals
+interpolated, as a smooth mesh is), with the copies of the triangles that reach into
 the tile a period either way in place of the spheres' periodic images; paths start ``TOP_HEIGHT``
 of the tile above the realization's highest vertex and a base lies ``BASE_GAP`` of it under its
 lowest (``z_top``, ``z_bottom`` and ``base_z`` are therefore stored per realization, not among the
@@ -112,8 +113,9 @@ class Config(Section):
     tile: float | None = Field(None, ge=4.0, le=1e4, description="tile period, in radii")
     subdivisions: int | None = Field(None, ge=0, le=MAX_SUBDIVISIONS, description="icosphere level")
     mesh_error: float | None = Field(None, gt=0.0, le=0.5, description="largest mesh-to-sphere distance, in radii")
-    shading: Literal["exact", "flat"] = Field("exact", description="exact: hits shaded with the sphere's normal; "
-                                              "flat: each icosphere triangle with its own (module doc)")
+    shading: Literal["exact", "flat", "smooth"] = Field("exact", description="exact: hits shaded with the sphere's "
+                                                        "normal; flat: each icosphere triangle with its own; smooth: "
+                                                        "with its vertex normals interpolated (module doc)")
 
 
 #: a realization expects at least this many spheres (or grains): a Poisson count of 10 is 0 with
@@ -126,8 +128,8 @@ def check(config) -> None:
     scene = config.scene
     if scene.subdivisions is not None and scene.mesh_error is not None:
         raise ValueError("scene.mesh_error: give either subdivisions or mesh_error, not both")
-    if scene.shading == "flat" and is_exact(scene):
-        raise ValueError("scene.shading = 'flat': for icospheres only; give subdivisions or mesh_error")
+    if laid_as_tile(scene.shading) and is_exact(scene):
+        raise ValueError(f"scene.shading = {scene.shading!r}: for icospheres only; give subdivisions or mesh_error")
     if scene.tile is not None or scene.depth is not None:
         resolved = resolve(config)
         if resolved["expected_spheres"] < MIN_EXPECTED_OBJECTS:
@@ -224,7 +226,9 @@ def scene_bytes(resolved: dict) -> int:
     """Expected spheres (with 6 standard deviations of Poisson spread) times their size."""
     n = resolved["expected_spheres"]
     spheres = n + 6.0 * math.sqrt(n) + 1.0
-    triangle = FLAT_TRIANGLE_BYTES if resolved["shading"] == "flat" else TRIANGLE_BYTES
+    triangle = TRIANGLE_BYTES
+    if laid_as_tile(resolved["shading"]):
+        triangle = FLAT_TRIANGLE_BYTES + periodic_tile.triangle_bytes(resolved) - periodic_tile.TRIANGLE_BYTES
     per_sphere = resolved["triangles_per_sphere"] * triangle or EXACT_SPHERE_BYTES
     return int(spheres * per_sphere)
 
@@ -247,7 +251,7 @@ def resolve(config) -> dict:
                  "vertex_radius": vertex_radius, "max_mesh_error": error}
     vertex_radius = model["vertex_radius"]
     # flat: the heights are the realization's tile's (module doc), stored per realization
-    heights = {} if scene.shading == "flat" else {"base_z": -depth - vertex_radius, "z_top": vertex_radius + SLAB_MARGIN,
+    heights = {} if laid_as_tile(scene.shading) else {"base_z": -depth - vertex_radius, "z_top": vertex_radius + SLAB_MARGIN,
                                                   "z_bottom": -depth - vertex_radius - SLAB_MARGIN}
     return {
         "kind": KIND,
@@ -286,6 +290,11 @@ def periodic_images(centres: np.ndarray, tile: float, reach: float):
     return np.concatenate(all_centres), np.concatenate(source)
 
 
+def laid_as_tile(shading: str) -> bool:
+    """Flat and smooth shading lay the icospheres as a periodic tile (module doc)."""
+    return shading in ("flat", "smooth")
+
+
 def draw(resolved: dict, rng: np.random.Generator):
     """One realization's spheres, drawn from ``rng`` as every realization is: the Poisson count,
     the centres (count, 3), uniform in the tile and the slab, then (icospheres) the rotations
@@ -301,11 +310,11 @@ def draw(resolved: dict, rng: np.random.Generator):
 def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
     centres, rotations = draw(resolved, rng)
     count = len(centres)
-    if resolved["shading"] == "flat":
+    if laid_as_tile(resolved["shading"]):
         tile = tile_of(resolved, centres, rotations)
         own = periodic_tile.summary(tile)
         heights = {key: own[key] for key in ("z_top", "z_bottom", "base_z")}
-        scene = periodic_tile.build(tile, heights, config.material, config.base)
+        scene = periodic_tile.build(tile, {**heights, "shading": resolved["shading"]}, config.material, config.base)
         scene.info = dict(resolved, spheres=int(count), **heights, **scene.info)
         return scene
     all_centres, source = periodic_images(centres, resolved["tile"], resolved["vertex_radius"])
@@ -350,7 +359,8 @@ def export_tile(config, path, realization: int = 0) -> dict:
     ``path``: its spheres, every one with its centre in the tile, as the icosphere triangles it
     lays (:func:`tile_of`: the vertices in float64 as laid, the faces in order; :func:`write_ply`);
     returns the ``[scene]`` section of scene ``mesh`` that traces them as ``shading = "flat"``
-    does (``period`` = the tile; give it the same ``[base]``). The realization is drawn as a run
+    (or ``"smooth"``, the config's where it is smooth) does (``period`` = the tile; give it the
+    same ``[base]``). The realization is drawn as a run
     draws it (``geometry_rng(run.seed, realization)``). ValueError, one line, for exact spheres."""
     if is_exact(config.scene):
         raise ValueError("scene.subdivisions: export_tile writes icospheres; give subdivisions or mesh_error")
@@ -358,7 +368,8 @@ def export_tile(config, path, realization: int = 0) -> dict:
     tile = tile_of(resolved, *draw(resolved, geometry_rng(config.run.seed, realization)))
     write_ply(path, tile.vertices, tile.faces, f"microsim poisson_spheres realization {realization} of seed "
                                                f"{config.run.seed}, tile {resolved['tile']:g}")
-    return {"kind": "mesh", "path": str(path), "period": resolved["tile"]}
+    shading = "smooth" if resolved["shading"] == "smooth" else "flat"
+    return {"kind": "mesh", "path": str(path), "period": resolved["tile"], "shading": shading}
 
 
 def write_ply(path, vertices, faces, comment: str = "") -> None:

@@ -87,6 +87,20 @@ def test_the_mesh_gives_the_flat_spheres_table_bit_for_bit(exported):
     assert np.all(spheres["albedo"][0][:, 0] > 0.2)  # light came back from every incidence
 
 
+def test_the_smooth_mesh_gives_the_smooth_spheres_table_bit_for_bit(exported, tmp_path):
+    """Smooth shading too: the corners' normals are computed from the same tile (welded across
+    the seams) by both scenes; and they are not the flat table."""
+    data = {**SPHERES, "scene": {**SPHERES["scene"], "shading": "smooth"}}
+    spheres = config.validate(data)
+    scene = poisson_spheres.export_tile(spheres, tmp_path / "smooth.ply")
+    assert scene["shading"] == "smooth"
+    meshed = config.validate({**data, "scene": scene})
+    (_, a), (_, b), (_, flat) = (runner.trace_realizations(c) for c in (spheres, meshed, exported[0]))
+    for name in a:
+        assert np.array_equal(a[name][0], b[name][0]), name
+    assert not np.array_equal(a["brdf"][0], flat["brdf"][0])
+
+
 def _rewritten(path: Path, name: str, move=(0.0, 0.0, 0.0), float32: bool = False) -> str:
     """The exported tile moved by ``move``, written as the exporter writes it or by trimesh (float32)."""
     read = trimesh.load(path, force="mesh", process=False)
@@ -112,11 +126,12 @@ def test_the_comparison_sees_a_changed_scene(change, exported):
     assert not np.array_equal(a["brdf"][0], b["brdf"][0])
 
 
-def test_flat_shading_needs_icospheres(tmp_path, capsys):
+@pytest.mark.parametrize("shading", ["flat", "smooth"])
+def test_flat_and_smooth_shading_need_icospheres(shading, tmp_path, capsys):
     from refusals import assert_run_refused, small_config
 
-    assert_run_refused(small_config('kind = "poisson_spheres"\nvolume_fraction = 0.3\nshading = "flat"'),
-                       "scene.shading", tmp_path, capsys, "icospheres only")
+    assert_run_refused(small_config(f'kind = "poisson_spheres"\nvolume_fraction = 0.3\nshading = "{shading}"'),
+                       f"scene.shading = '{shading}'", tmp_path, capsys, "icospheres only")
 
 
 def test_a_sphere_tile_is_checked_as_every_tile():

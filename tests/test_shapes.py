@@ -7,7 +7,7 @@ from microsim.shapes import ELLIPSOID, PLANE, SPHERE, Shapes, surface_point
 
 
 def project(shapes, k, points):
-    out = np.array([surface_point(shapes.code[k], shapes.params[k], tuple(p)) for p in points])
+    out = np.array([surface_point(shapes.code[k], shapes.params[k], tuple(p), (0.0, 0.0, -1.0)) for p in points])
     return out[:, 0], out[:, 1]
 
 

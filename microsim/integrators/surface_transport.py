@@ -93,7 +93,7 @@ def follow(work, i, hit, world, sensor, max_order, tally):
             tally.counts[INSIDE_HITS] += 1
             state = (pass_through(h, d, facing, ng, scene.shape_size[s], scene.period), state[1], -1)
         else:
-            q, n = surface_point(scene.shape_code[s], scene.shape_params[s], h)
+            q, n = surface_point(scene.shape_code[s], scene.shape_params[s], h, d)
             kind, state = INTERACTION, (q, n, s)
     else:
         end = rays.end[i]
