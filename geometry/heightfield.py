@@ -19,7 +19,9 @@ grid cell is two triangles (:func:`triangulate`), each its own flat facet or, wi
 :mod:`geometry.periodic_tile` like a user's mesh, laid and summarized as it is (not run through
 the mesh checks: a periodic grid is a surface over the tile by construction); a generated one
 records in ``scene/`` per realization what a file's records once (area,
-mean_cosine, rms_slope, z_top, ...). With ``statistics = true`` each realization's measured
+mean_cosine, rms_slope, z_top, ...). With ``intersector = "grid"`` (the default) the scene also
+carries its grid (:func:`height_grid`), which the tracer walks instead of handing the triangles
+to Embree (:mod:`microsim.integrators.grid`: the same hits, faster). With ``statistics = true`` each realization's measured
 NDF, visible NDF and G1 are stored too (:mod:`microsim.surface_statistics`).
 """
 
@@ -34,6 +36,7 @@ import pydantic
 from pydantic import Field
 
 from microsim import surface_statistics
+from microsim.integrators.grid import HeightGrid
 from microsim.physics import distributions as nd
 from microsim.scene import Scene
 from microsim.schema import Section
@@ -45,13 +48,14 @@ KIND = "heightfield"
 INTEGRATOR = "surface"
 #: what sets the scene's size, for the memory refusal (microsim.runner.check_memory)
 SIZE = "take fewer samples (a smaller array in scene.path; a shorter scene.tile or a larger scene.pixel)"
-#: the generator protocol's, as every periodic tile has it
-for_backend = periodic_tile.for_backend
 #: most samples a side of a height array
 MAX_SAMPLES = 4096
 #: keys of a generated surface only, and of a height file only
 GENERATOR_KEYS = ("roughness", "roughness_x", "roughness_y", "rms_slope", "correlation_length", "tile")
 FILE_KEYS = ("height_scale",)
+#: the generator protocol's, as every periodic tile has it (the grid intersector walks the grid
+#: whichever backend the run names: scene/intersector says so)
+for_backend = periodic_tile.for_backend
 #: a heightfield's facets are a pixel across: its copies beyond the sides (those within
 #: BASE_MARGIN and one pixel of a side, about 0.04 + 4 / n) add at most this share on grids of 80
 #: samples a side or more (more on smaller grids, whose few triangles weigh nothing in memory)
@@ -84,6 +88,9 @@ class Config(Section):
     tile: float | None = Field(None, gt=0.0, le=1e9, description="generated: the period (default: 16 correlation "
                                "lengths, longer where grazing rays need it; whole pixels)")
     shading: Literal["flat", "smooth"] = Field("flat", description=periodic_tile.SHADING_DESCRIPTION)
+    intersector: Literal["triangles", "grid"] = Field("grid", description="how rays meet the triangles: "
+                                                      "triangles (Embree) or grid (a walk over the grid's cells, no "
+                                                      "Embree scene; the same triangles)")
     statistics: bool = surface_statistics.statistics_key()
     statistics_rays: int | None = surface_statistics.rays_key()
 
@@ -232,7 +239,8 @@ def _generated(config) -> dict:
         raise ValueError(f"scene.tile = {samples * pixel:g}: {samples} samples of scene.pixel = {pixel:g} a side; "
                          f"accepted: 2 to {MAX_SAMPLES}")
     period = samples * pixel
-    return {"kind": KIND, "generator": scene.generator, "shading": scene.shading, "roughness_x": alpha_x, "roughness_y": alpha_y,
+    return {"kind": KIND, "generator": scene.generator, "shading": scene.shading, "intersector": scene.intersector,
+            "roughness_x": alpha_x, "roughness_y": alpha_y,
             "correlation_length": scene.correlation, **field, "pixel": pixel, "samples": samples,
             "samples_per_correlation": scene.correlation / pixel, "period": period, "period_y": period,
             "tile": period, "tile_default": scene.tile is None, "tile_bias_floor": floor, "surface_triangles": 2 * samples**2,
@@ -246,7 +254,8 @@ def resolve(config) -> dict:
     if scene.generator is not None:
         return {**_generated(config), **statistics}
     tile, digest = load(config)
-    return {"kind": KIND, "path": scene.path, "shading": scene.shading, "pixel": file_pixel(scene),
+    return {"kind": KIND, "path": scene.path, "shading": scene.shading, "intersector": scene.intersector,
+            "pixel": file_pixel(scene),
             "height_scale": scene.height_factor,
             "sha256": digest, **periodic_tile.summary(tile), **statistics}
 
@@ -269,12 +278,24 @@ def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
     from ``rng``, whose own summary (area, mean_cosine, rms_slope, heights) the scene's info
     carries; with ``statistics``, the realization's NDF and masking measured."""
     if resolved.get("generator") is None:
-        tile = load(config)[0]
-        scene = periodic_tile.build(tile, resolved, config.material, config.base)
+        tile, laid = load(config)[0], resolved
+        scene = periodic_tile.build(tile, laid, config.material, config.base)
     else:
         tile = realize(resolved, rng)
         own = periodic_tile.summary(tile)
-        scene = periodic_tile.build(tile, {**resolved, **own}, config.material, config.base)
+        laid = {**resolved, **own}
+        scene = periodic_tile.build(tile, laid, config.material, config.base)
         scene.info.update({key: own[key] for key in own.keys() - resolved.keys()})
         scene.info.update(zip(("measured_roughness_x", "measured_roughness_y"), periodic_tile.roughness(tile)))
+    if resolved.get("intersector") == "grid":
+        scene.grid = height_grid(tile, laid, scene, config.base is not None)
     return surface_statistics.add(scene, tile, resolved, config, rng)
+
+
+def height_grid(tile: Tile, laid: dict, scene: Scene, has_base: bool) -> HeightGrid:
+    """The grid the grid backend walks (microsim.integrators.grid): the tile's heights (its
+    vertices as :func:`triangulate` lays them), where its own faces and the base lie in ``scene``."""
+    n = math.isqrt(len(tile.vertices)) - 1
+    heights = tile.vertices[:, 2].reshape(n + 1, n + 1)[:n, :n]
+    base = {"base_z": laid["base_z"], "base_prim": scene.n_triangles - 2} if has_base else {}
+    return HeightGrid.of(heights, tile.period / n, periodic_tile.first_own_face(tile), **base)

@@ -296,22 +296,41 @@ def corner_normals(tile: Tile) -> np.ndarray:
     return np.where(cancelled[:, :, None], tile.normals[:, None, :], summed / np.where(length > 0.0, length, 1.0))
 
 
+def _copies(tile: Tile):
+    """(shift (dx, dy), which faces, moved by dx L_x and dy L_y, reach within BASE_MARGIN of the
+    tile) for the shifts by a period either way in x and y, in the order :func:`build` lays them."""
+    sides = np.array(tile.sides)
+    corners = tile.vertices[tile.faces][:, :, :2]
+    high, low = corners.max(axis=1), corners.min(axis=1)  # (F, 2): a face's bounds in x and y
+    margin = BASE_MARGIN * sides
+    near = [[(high[:, axis] + k * sides[axis] >= -margin[axis]) & (low[:, axis] + k * sides[axis] <= sides[axis] + margin[axis])
+             for k in (-1, 0, 1)] for axis in (0, 1)]
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            yield (dx, dy), near[0][dx + 1] & near[1][dy + 1]
+
+
+def first_own_face(tile: Tile) -> int:
+    """The scene's index of the tile's own face 0 as :func:`build` lays them (after the copies
+    shifted by (-1, *) and (0, -1)); every face of the tile itself is laid, in order."""
+    start = 0
+    for shift, near in _copies(tile):
+        if shift == (0, 0):
+            if not near.all():
+                raise ValueError("faces of the tile lie beyond it: its own faces are not laid in order")
+            return start
+        start += int(np.count_nonzero(near))
+
+
 def build(tile: Tile, resolved: dict, material, base) -> Scene:
     """The tile's triangles, each its own facet, and their copies within BASE_MARGIN beyond
     the sides (module doc); flat facets, or smooth ones where ``resolved["shading"]`` says so;
     ``base`` (a material, or None) under it."""
-    sides = np.array(tile.sides)
-    corners = tile.vertices[tile.faces]
     smooth = resolved.get("shading") == SMOOTH_SHADING
     shading = corner_normals(tile) if smooth else tile.normals
-    margin = BASE_MARGIN * sides
-    parts = []
-    for dx in (-1, 0, 1):
-        for dy in (-1, 0, 1):
-            moved = corners + np.array([dx * sides[0], dy * sides[1], 0.0])
-            near = (np.all(moved[:, :, :2].max(axis=1) >= -margin, axis=1)
-                    & np.all(moved[:, :, :2].min(axis=1) <= sides + margin, axis=1))
-            parts.append((moved[near], shading[near]))
+    corners, sides = tile.vertices[tile.faces], tile.sides
+    parts = [(corners[near] + np.array([dx * sides[0], dy * sides[1], 0.0]), shading[near])
+             for (dx, dy), near in _copies(tile)]
     triangles = np.concatenate([p[0] for p in parts])
     normals = np.concatenate([p[1] for p in parts])
     n = len(triangles)

@@ -88,6 +88,9 @@ class Scene:
     sphere_scale: tuple = (1.0, 1.0)
     base_material: int = -1
     tile_y: float | None = None  # period L_y in y; None: the same as tile
+    #: a heightfield's grid (microsim.integrators.grid.HeightGrid): its triangles are then met by
+    #: walking the grid instead of by Embree; None: Embree
+    grid: object = None
 
     def __post_init__(self):
         if self.tile_y is None:

@@ -20,9 +20,7 @@ import numpy as np
 from .. import embree
 from ..tally import SEGMENTS
 from .scheduler import CHUNK_PATHS, SLOTS, chunk_tally, trace_in_waves, wave_rows, workspace
-from .events import MAX_IDLE_SEGMENTS
-from .surface_transport import TOP, clearance, evaluate_on_shape, follow, prepare_segment, start_path, wrap_point, \
-    wrap_side
+from .surface_transport import evaluate_on_shape, follow, prepare_segment, start_path, visible_through_tile
 from .walk import EVALUATE, VISIBILITY
 
 class DirectWorld(NamedTuple):
@@ -148,24 +146,12 @@ EVALUATE.register(DirectWorld)(evaluate_on_shape)
 
 
 @VISIBILITY.register(DirectWorld)
-def visible_through_tile(world, work, i, state, wo):
-    """1 if the ray from the surface point of ``state`` = (point, normal, shape), lifted off the
-    surface as a scattered ray is (the clearance along the normal), reaches z_top along wo without
-    meeting anything, wrapping at the tile's sides as often as it takes (Embree's occluded query
-    on each piece); 0 if it is blocked, or wo goes below the surface's tangent plane or down."""
-    scene, handle = world
-    p, n, s = state
-    if wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2] <= 0.0 or wo[2] <= 0.0:
-        return 0.0
-    rays = work.rays
-    o = wrap_point(p, n, clearance(p, scene.shape_size[s]), scene.period)
-    for _ in range(MAX_IDLE_SEGMENTS):
-        prepare_segment(rays, i, o, wo, scene)
-        end, t = rays.end[i], np.float64(rays.tfar[i])
-        if embree.is_occluded(handle.handle, work.queries, i):
-            return 0.0
-        if end == TOP:
-            return 1.0
-        o = (np.float64(rays.origin[i, 0]), np.float64(rays.origin[i, 1]), np.float64(rays.origin[i, 2]))
-        o = wrap_side(o, wo, t, end, scene.period)
-    return 0.0
+def visible_through_embree(world, work, i, state, wo):
+    """:func:`~.surface_transport.visible_through_tile`, Embree's occluded query on each piece."""
+    return visible_through_tile(world, work, i, state, wo, occluded_in_embree)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def occluded_in_embree(world, work, i):
+    """Whether anything lies on the segment in row i (Embree's occluded query)."""
+    return embree.is_occluded(world.handle.handle, work.queries, i)

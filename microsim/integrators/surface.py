@@ -3,7 +3,8 @@
 Its paths and events are :mod:`.surface_transport`'s kernels; its two backends, named as
 ``run.backend`` names them, call Embree and schedule paths in two ways: :mod:`.direct` (numba
 calls Embree, paths run to completion, threads) and :mod:`.embreex` (one embreex call per
-segment of all live paths).
+segment of all live paths). A scene that carries a height grid (``Scene.grid``: a heightfield
+with ``intersector = "grid"``) is traced by :mod:`.grid` instead, whichever backend is named.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from ..estimators import DEFAULT, build
 from ..materials import Absorber
 from ..scene import Scene, SceneBuilder
 from ..tally import SINGLE_ALBEDO
-from . import direct, embreex
+from . import direct, embreex, grid
 from .records import Beam
 
 #: ``run.backend`` -> the module of that backend (as microsim.choices.BACKENDS names them): ``backend(scene, threads, estimators)`` and
@@ -42,7 +43,8 @@ class SurfaceTracer:
         self.scene, self.sensor = scene, sensor
         self.arrays = scene.arrays()
         estimators = build(DEFAULT, sensor) if estimators is None else estimators
-        self.backend = backend_module(backend).backend(scene, threads, estimators)
+        module = grid if scene.grid is not None else backend_module(backend)
+        self.backend = module.backend(scene, threads, estimators)
 
     def trace(self, wi, n_paths: int, key, max_order: int, albedo_scale=SINGLE_ALBEDO, phi_i=None):
         """Trace ``n_paths`` paths arriving along -``wi``; return their :class:`~microsim.tally.Tally`.
@@ -73,7 +75,8 @@ class SurfaceTracer:
         builder.add_base_plane(-0.5, Absorber(kind="absorber"))
         beam = Beam(np.array([0.0, 0.0, 1.0]), np.uint64(0), 1, 0, np.ones(albedos))
         estimators = build(DEFAULT, sensor) if estimators is None else estimators
-        backend_module(backend).compile_kernels(beam, builder.build(1.0, -1.0, {}), sensor, estimators)
+        module = grid if scene is not None and scene.get("intersector") == "grid" else backend_module(backend)
+        module.compile_kernels(beam, builder.build(1.0, -1.0, {}), sensor, estimators)
 
 
 def backend_module(name: str):

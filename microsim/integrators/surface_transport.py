@@ -46,7 +46,7 @@ from ..materials import evaluate, scatter
 from ..physics.rng import uniform
 from ..shapes import surface_point
 from ..tally import INSIDE_HITS
-from .events import begin_path
+from .events import MAX_IDLE_SEGMENTS, begin_path
 from .walk import EXIT, IDLE, INTERACTION, TRANSMISSION, take_event
 
 #: segment ends: the tile side (wrap), the top (leave), the bottom (transmitted)
@@ -129,6 +129,31 @@ def evaluate_on_shape(world, state, wi, wo):
     scene = world.scene
     m = scene.shape_material[s]
     return evaluate(scene.material_code[m], scene.material_params[m], wi, wo, n)
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def visible_through_tile(world, work, i, state, wo, blocked):
+    """1 if the ray from the surface point of ``state`` = (point, normal, shape), lifted off the
+    surface as a scattered ray is (the clearance along the normal), reaches z_top along wo without
+    meeting anything, wrapping at the tile's sides as often as it takes (``blocked(world, work,
+    i)``, a backend's query, on each piece, stored in row i); 0 if it is blocked, or wo goes
+    below the surface's tangent plane or down."""
+    scene = world.scene
+    p, n, s = state
+    if wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2] <= 0.0 or wo[2] <= 0.0:
+        return 0.0
+    rays = work.rays
+    o = wrap_point(p, n, clearance(p, scene.shape_size[s]), scene.period)
+    for _ in range(MAX_IDLE_SEGMENTS):
+        prepare_segment(rays, i, o, wo, scene)
+        end, t = rays.end[i], np.float64(rays.tfar[i])
+        if blocked(world, work, i):
+            return 0.0
+        if end == TOP:
+            return 1.0
+        o = (np.float64(rays.origin[i, 0]), np.float64(rays.origin[i, 1]), np.float64(rays.origin[i, 2]))
+        o = wrap_side(o, wo, t, end, scene.period)
+    return 0.0
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
