@@ -298,4 +298,4 @@ def height_grid(tile: Tile, laid: dict, scene: Scene, has_base: bool) -> HeightG
     n = math.isqrt(len(tile.vertices)) - 1
     heights = tile.vertices[:, 2].reshape(n + 1, n + 1)[:n, :n]
     base = {"base_z": laid["base_z"], "base_prim": scene.n_triangles - 2} if has_base else {}
-    return HeightGrid.of(heights, tile.period / n, periodic_tile.first_own_face(tile), **base)
+    return HeightGrid.of(heights, laid["pixel"], periodic_tile.first_own_face(tile), **base)

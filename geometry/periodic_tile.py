@@ -277,12 +277,7 @@ def corner_normals(tile: Tile) -> np.ndarray:
     the longer side) once folded into the tile counted as one, so that a seam's two sides share
     their normals. A corner whose faces' area vectors cancel (the two sides of a sheet) takes its
     own face's normal."""
-    sides = np.array(tile.sides)
-    step = TOLERANCE * max(sides)
-    keys = np.round(tile.vertices / step).astype(np.int64)
-    for axis in (0, 1):
-        keys[:, axis] %= round(sides[axis] / step)
-    welded = np.unique(keys, axis=0, return_inverse=True)[1].reshape(-1)
+    welded = _welded(tile.vertices, np.array(tile.sides), TOLERANCE * max(tile.sides))
     area_vectors = tile.normals * tile.areas[:, None]
     total = np.zeros((welded.max() + 1, 3))
     magnitude = np.zeros(welded.max() + 1)
@@ -320,6 +315,23 @@ def first_own_face(tile: Tile) -> int:
                 raise ValueError("faces of the tile lie beyond it: its own faces are not laid in order")
             return start
         start += int(np.count_nonzero(near))
+
+
+def _welded(vertices, sides, distance: float) -> np.ndarray:
+    """(V,) the index of each vertex's class: vertices within ``distance`` of each other once
+    folded into the tile (x and y periodic), chained, are one class. A k-d tree on the periodic
+    box finds the pairs (rounding to a grid would split a pair that straddles a cell's edge)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    folded = np.column_stack([np.mod(vertices[:, :2], sides), vertices[:, 2] - vertices[:, 2].min()])
+    folded[:, :2] = np.where(folded[:, :2] >= sides, 0.0, folded[:, :2])  # mod may round up to the side
+    box = np.array([*sides, 2.0 * folded[:, 2].max() + 1.0])  # z is not periodic: a box twice its height
+    pairs = cKDTree(folded, boxsize=box).query_pairs(distance, output_type="ndarray")
+    n = len(vertices)
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    return connected_components(graph, directed=False)[1]
 
 
 def build(tile: Tile, resolved: dict, material, base) -> Scene:

@@ -8,8 +8,8 @@ microsim/integrators/grid.py): the same triangles as Embree's, met by walking th
   paths) on the same surface (a height file), agree cell by cell and at exact directions (next-
   event estimation, whose shadow rays walk the grid too) within their errors: the mean z^2 lies
   within ``stat_bounds``' two-sided bounds.
-- A [base] under the grid is met where the surface lets light through (a pass-through at a back
-  face): a white tile with a black base loses nothing a white one keeps.
+- A [base] under the grid is met by a ray under the surface (as a pass-through at a back face
+  leaves one), and not without a base.
 - Energy on the grid: tests/test_periodic_tile_physics.py (heightfields default to it); on the
   triangles: here.
 """
@@ -160,7 +160,11 @@ def test_the_grid_is_the_tile_s_heights():
     tile = heightfield.realize(plan.scene, geometry_rng(plan.config.run.seed, 0))
     n = len(scene.grid.heights)
     assert n == plan.scene["samples"] and scene.grid.pixel == plan.scene["pixel"]
+    heights = tile.vertices[:, 2].reshape(n + 1, n + 1)
+    np.testing.assert_array_equal(scene.grid.heights, heights[:n, :n])
+    np.testing.assert_array_equal(heights[n], heights[0])  # the grid wraps
     first = periodic_tile.first_own_face(tile)
+    assert scene.grid.first_face == first
     own = scene.vertices[scene.faces[first:first + len(tile.faces)]]
     np.testing.assert_array_equal(own, tile.vertices[tile.faces].astype(np.float32))
     assert isinstance(scene.grid, HeightGrid)

@@ -101,6 +101,34 @@ def test_a_seam_s_two_sides_share_their_normals():
     assert np.degrees(np.arccos(tilted[:, 2].min())) > 30.0  # steep ridges: the check is not of a plane
 
 
+@pytest.mark.parametrize("float32", [False, True], ids=["float64", "float32"])
+def test_an_offset_seam_of_a_rectangular_tile_shares_its_normals(float32):
+    """A rectangular tile (L_y not a whole number of welding steps) whose seam in y lies off 0,
+    its vertices written in float32 or not: the two sides of each seam still weld (rounding
+    coordinates to a grid split 14 of 16 such pairs, their normals 16 deg apart)."""
+    n, sides, offset = 16, (1.0, 0.7123456789), -0.3000002
+    u = np.arange(n + 1) / n
+    gx, gy = np.meshgrid(u * sides[0], u * sides[1] + offset, indexing="ij")
+    h = 0.1 * np.sin(2 * np.pi * gx / sides[0]) * np.cos(2 * np.pi * (gy - offset) / sides[1]) + 0.05 * np.sin(
+        2 * np.pi * (gy - offset) / sides[1])
+    vertices = np.column_stack([gx.ravel(), gy.ravel(), h.ravel()])
+    if float32:
+        vertices = vertices.astype(np.float32).astype(np.float64)
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    a = (i * (n + 1) + j).ravel()
+    faces = np.concatenate([np.column_stack([a, a + n + 1, a + n + 2]), np.column_stack([a, a + n + 2, a + 1])])
+    tile = periodic_tile.checked("k", vertices, faces, sides, closed_by_base=False)
+    normals = periodic_tile.corner_normals(tile)
+    at = {}
+    for face, corners in zip(faces, normals):
+        for vertex, normal in zip(face, corners):
+            at.setdefault(vertex, normal)
+    grid = np.array([at[v] for v in range(len(vertices))]).reshape(n + 1, n + 1, 3)
+    np.testing.assert_allclose(grid[:, 0], grid[:, n], rtol=0, atol=1e-12)  # the seam in y
+    np.testing.assert_allclose(grid[0, :], grid[n, :], rtol=0, atol=1e-12)  # and in x
+    assert np.abs(grid[:, 0] - grid[:, 1]).max() > 1e-3  # not a plane
+
+
 @pytest.mark.parametrize("level", [1, 2, 3])
 def test_an_icosphere_s_corner_normals_are_nearly_radial(level):
     """Area-weighted normals of an icosphere: radial at level 1 (every vertex's faces are alike),
