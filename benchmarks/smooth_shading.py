@@ -74,7 +74,8 @@ def convergence(paths: int, levels, directory: Path) -> dict:
                     "chi2_per_cell": chi2.round(3).tolist(),
                     "albedo_difference": (table.albedo - exact.albedo).round(5).tolist(),
                     "albedo_stderr": exact.albedo_stderr.round(5).tolist()}
-                print(f"   {shading}: chi2/cell {chi2.round(2)}, albedo - exact {(table.albedo - exact.albedo).round(4)}")
+                difference = (table.albedo - exact.albedo).round(4)
+                print(f"   {shading}: chi2/cell {chi2.round(2)}, albedo - exact {difference}")
     return out
 
 
@@ -88,7 +89,8 @@ def reciprocity(paths: int, samples, directory: Path) -> dict:
                 "scene": {"kind": "heightfield", "path": str(directory / "ridges.npy"), "pixel": 1.0 / n,
                           "shading": shading},
                 "material": {"kind": "lambert", "albedo": 0.8},
-                "illumination": {"theta_i_deg": [t for _, t, _ in incidences], "phi_i_deg": [p for _, _, p in incidences]},
+                "illumination": {"theta_i_deg": [t for _, t, _ in incidences],
+                                 "phi_i_deg": [p for _, _, p in incidences]},
                 "sensor": {"cells": RECIPROCITY_CELLS}, "run": {"paths": paths, "realizations": 16, "seed": 5}},
                 directory)
             z = reciprocity_z(table, incidences, table.brdf, table.brdf_stderr)

@@ -21,7 +21,8 @@ the mesh checks: a periodic grid is a surface over the tile by construction); a 
 records in ``scene/`` per realization what a file's records once (area,
 mean_cosine, rms_slope, z_top, ...). With ``intersector = "grid"`` (the default) the scene also
 carries its grid (:func:`height_grid`), which the tracer walks instead of handing the triangles
-to Embree (:mod:`microsim.integrators.grid`: the same hits, faster). With ``statistics = true`` each realization's measured
+to Embree (:mod:`microsim.integrators.grid`: the same hits, faster). With ``statistics = true``
+each realization's measured
 NDF, visible NDF and G1 are stored too (:mod:`microsim.surface_statistics`).
 """
 
@@ -239,8 +240,7 @@ def _generated(config) -> dict:
         raise ValueError(f"scene.tile = {samples * pixel:g}: {samples} samples of scene.pixel = {pixel:g} a side; "
                          f"accepted: 2 to {MAX_SAMPLES}")
     period = samples * pixel
-    return {"kind": KIND, "generator": scene.generator, "shading": scene.shading, "intersector": scene.intersector,
-            "roughness_x": alpha_x, "roughness_y": alpha_y,
+    return {"kind": KIND, "generator": scene.generator, **_tracing(scene), "roughness_x": alpha_x, "roughness_y": alpha_y,
             "correlation_length": scene.correlation, **field, "pixel": pixel, "samples": samples,
             "samples_per_correlation": scene.correlation / pixel, "period": period, "period_y": period,
             "tile": period, "tile_default": scene.tile is None, "tile_bias_floor": floor, "surface_triangles": 2 * samples**2,
@@ -254,10 +254,14 @@ def resolve(config) -> dict:
     if scene.generator is not None:
         return {**_generated(config), **statistics}
     tile, digest = load(config)
-    return {"kind": KIND, "path": scene.path, "shading": scene.shading, "intersector": scene.intersector,
-            "pixel": file_pixel(scene),
+    return {"kind": KIND, "path": scene.path, **_tracing(scene), "pixel": file_pixel(scene),
             "height_scale": scene.height_factor,
             "sha256": digest, **periodic_tile.summary(tile), **statistics}
+
+
+def _tracing(scene) -> dict:
+    """How the surface is shaded and met, as both sources resolve it."""
+    return {"shading": scene.shading, "intersector": scene.intersector}
 
 
 def scene_bytes(resolved: dict) -> int:

@@ -298,8 +298,13 @@ def _copies(tile: Tile):
     corners = tile.vertices[tile.faces][:, :, :2]
     high, low = corners.max(axis=1), corners.min(axis=1)  # (F, 2): a face's bounds in x and y
     margin = BASE_MARGIN * sides
-    near = [[(high[:, axis] + k * sides[axis] >= -margin[axis]) & (low[:, axis] + k * sides[axis] <= sides[axis] + margin[axis])
-             for k in (-1, 0, 1)] for axis in (0, 1)]
+
+    def reaching(axis: int, k: int) -> np.ndarray:
+        """Faces that, moved by k periods along ``axis``, reach within the margin of the tile."""
+        shift = k * sides[axis]
+        return (high[:, axis] + shift >= -margin[axis]) & (low[:, axis] + shift <= sides[axis] + margin[axis])
+
+    near = [[reaching(axis, k) for k in (-1, 0, 1)] for axis in (0, 1)]
     for dx in (-1, 0, 1):
         for dy in (-1, 0, 1):
             yield (dx, dy), near[0][dx + 1] & near[1][dy + 1]

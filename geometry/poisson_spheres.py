@@ -251,8 +251,9 @@ def resolve(config) -> dict:
                  "vertex_radius": vertex_radius, "max_mesh_error": error}
     vertex_radius = model["vertex_radius"]
     # flat: the heights are the realization's tile's (module doc), stored per realization
-    heights = {} if laid_as_tile(scene.shading) else {"base_z": -depth - vertex_radius, "z_top": vertex_radius + SLAB_MARGIN,
-                                                  "z_bottom": -depth - vertex_radius - SLAB_MARGIN}
+    heights = {} if laid_as_tile(scene.shading) else {"base_z": -depth - vertex_radius,
+                                                      "z_top": vertex_radius + SLAB_MARGIN,
+                                                      "z_bottom": -depth - vertex_radius - SLAB_MARGIN}
     return {
         "kind": KIND,
         "volume_fraction": phi,

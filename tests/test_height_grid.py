@@ -48,7 +48,8 @@ def realization(data: dict):
 
 def walked(grid, origins, directions, tfar):
     """(face or -1, t) of the walk on every ray."""
-    out = [walk(grid, tuple(map(float, o)), tuple(map(float, d)), float(t)) for o, d, t in zip(origins, directions, tfar)]
+    out = [walk(grid, tuple(map(float, o)), tuple(map(float, d)), float(t))
+           for o, d, t in zip(origins, directions, tfar)]
     return np.array([f for f, _ in out]), np.array([t for _, t in out])
 
 

@@ -4,7 +4,8 @@ c. Energy: a white Lambertian or mirror tile is closed by its surface (no [base]
    absorbed or transmitted), so every path leaves or is truncated: albedo + truncated = 1 to
    1e-6 at theta_i = 0, 60, 85 and 89 deg, for a mesh with vertical walls (cells at several
    heights, one a ridge running through the seams) and an anisotropic heightfield, each white
-   and mirror, flat and smooth (tests/test_smooth_shading.py: its reciprocity). With 40 000 paths an incidence a single lost path would miss 1e-6 25-fold;
+   and mirror, flat and smooth (tests/test_smooth_shading.py: its reciprocity). With 40 000
+   paths an incidence a single lost path would miss 1e-6 25-fold;
    tests/test_mesh.py and test_heightfield.py already hold a white bumpy tile (no walls, no
    mirror, no 85 deg) to 1e-12.
    Reciprocity: an anisotropic Lambertian heightfield (albedo 0.8, about a third of the energy

@@ -43,7 +43,8 @@ class HeightGrid(NamedTuple):
     @classmethod
     def of(cls, heights, pixel: float, first_face: int, base_z: float = -math.inf, base_prim: int = -1):
         heights = np.ascontiguousarray(heights, np.float64)
-        top = np.maximum.reduce([np.roll(heights, shift, axis=(0, 1)) for shift in ((0, 0), (-1, 0), (0, -1), (-1, -1))])
+        corners = ((0, 0), (-1, 0), (0, -1), (-1, -1))  # (i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)
+        top = np.maximum.reduce([np.roll(heights, shift, axis=(0, 1)) for shift in corners])
         return cls(heights, top, float(pixel), float(top.max()), int(first_face), float(base_z), int(base_prim))
 
 
