@@ -242,12 +242,17 @@ class Sensor(NamedTuple):
     def ring_of_cell(self) -> np.ndarray:
         return np.repeat(np.arange(self.n_rings), self.ring_counts)
 
-    def directions(self) -> np.ndarray:
-        """Cell centre directions (N, 3): mid theta of the ring, mid phi of the cell."""
+    def cell_centres(self) -> tuple[np.ndarray, np.ndarray]:
+        """theta and phi of every cell's centre, radians: mid theta of the ring (0 for the polar
+        cap), mid phi of the cell."""
         t_lo, t_hi, p_lo, p_hi = self.cell_bounds()
         theta = 0.5 * (t_lo + t_hi)
         theta[self.ring_of_cell() == 0] = 0.0
-        return direction(theta, 0.5 * (p_lo + p_hi))
+        return theta, 0.5 * (p_lo + p_hi)
+
+    def directions(self) -> np.ndarray:
+        """Cell centre directions (N, 3) (:meth:`cell_centres`)."""
+        return direction(*self.cell_centres())
 
     def solid_angle(self) -> np.ndarray:
         """Solid angle of every cell: exactly 2 pi / N."""

@@ -17,7 +17,7 @@ from .tally import COUNT_NAMES, ENERGY_NAMES
 
 #: the version of the layout, written as the ``format_version`` attribute of every table; a
 #: table of another major version is refused by the loader (a table without one is 1.0)
-FORMAT_VERSION = "1.0"
+FORMAT_VERSION = "1.1"
 
 
 @dataclass(frozen=True)
@@ -51,12 +51,29 @@ AXIS_LENGTHS = {
     "orders": "4: scattering orders 1, 2, 3 and 4 or more",
     "retro_rings": "n_r = sensor.retro_rings",
     "points": "n_d, the points of sensor.directions_deg then sensor.retro_points_deg",
+    "other_points": "n_d again: the second axis of a covariance between the points",
     "xyz": "3: the components of a unit vector",
+    "rings": "the sensor's rings, from the pole",
+    "bounds": "2: a cell's lower and upper bound",
+    "realizations": "the realizations (the attribute realizations)",
+    "masking_directions": "the directions of the scene's attribute statistics_directions_deg",
 }
+
+#: what the dimension scale of each axis holds (its netCDF coordinate variable, format 1.1):
+#: the index along it, but for the orders
+SCALES = {axis: "0, 1, ...: the index along it" for axis in AXIS_LENGTHS} | {
+    "orders": "1, 2, 3, 4: the scattering order (4: four or more)", "xyz": "0, 1, 2: x, y, z",
+    "bounds": "0, 1: lower, upper"}
 
 ATTRIBUTES = (
     Attribute("format_version", f"the version of this layout ({FORMAT_VERSION})", "tables written by microsim 0.1.0 "
               "after the layout was declared; older tables have the same layout without it"),
+    Attribute("units", "each dataset's unit, as CF spells it (1: a number)", "format 1.1", group="every dataset"),
+    Attribute("long_name", "what each dataset holds (its meaning below)", "format 1.1", group="every dataset"),
+    Attribute("ancillary_variables", "the dataset's standard error (and covariance): X_stderr", "format 1.1, "
+              "datasets that have one", group="every dataset"),
+    Attribute("coordinates", "the coordinates along its axes: theta_i phi_i, theta_o phi_o", "format 1.1, "
+              "datasets of the root with incidence or cell axes", group="every dataset"),
     Attribute("microsim_version", "the version of microsim that wrote the table"),
     Attribute("config_toml", "the run config, validated and complete (every default written out), as TOML"),
     Attribute("created_utc", "when the table was written (ISO 8601, UTC)"),
@@ -99,7 +116,7 @@ CORE = (
     Dataset("sensor/solid_angle", ("cells",), "sr", "solid angle of each cell", required=True),
     Dataset("sensor/projected_solid_angle", ("cells",), "sr", "projected solid angle P_C of each cell "
             "(the integral of cos theta over it)", required=True),
-    Dataset("sensor/ring_counts", None, "", "cells in each ring, from the pole (the sensor is rebuilt from it)",
+    Dataset("sensor/ring_counts", ("rings",), "", "cells in each ring, from the pole (the sensor is rebuilt from it)",
             required=True),
     *(Dataset(f"energy/{name}{suffix}", ("incidences",), "",
               doc if not suffix else f"standard error of energy/{name}",
@@ -107,19 +124,37 @@ CORE = (
       for name, doc in ((n, _ENERGY_DOCS[n]) for n in (*ENERGY_NAMES, "balance")) for suffix in ("", "_stderr")),
     Dataset("paths", ("incidences",), "", "paths traced per incidence", required=True),
     *(Dataset(f"diagnostics/{name}", ("incidences",), "", _COUNT_DOCS[name]) for name in COUNT_NAMES),
-    Dataset("scene/<count>", None, "", "what each realization generated (spheres, images, triangles, ...); the "
+    Dataset("scene/<count>", ("realizations",), "", "what each realization generated (spheres, images, triangles, ...); the "
             "group's attributes hold the resolved scene parameters and the largest triangle count"),
-    *(Dataset(f"scene/{name}", None, unit, f"(realizations, {shape}): {doc} (microsim/surface_statistics.py; "
+    *(Dataset(f"scene/{name}", ("realizations", *axes), unit, f"{doc} (microsim/surface_statistics.py; "
               "masking directions: the attribute scene/statistics_directions_deg)",
               "mesh and heightfield scenes with statistics = true")
-      for name, shape, unit, doc in (
-          ("ndf", "cells", "1/sr", "each realization's NDF D(m), averaged over each sensor cell of normals m"),
-          ("vndf", "masking directions, cells", "1/sr", "its visible NDF D_wo(m) = G1(wo, m) <wo.m> D(m) / "
+      for name, axes, unit, doc in (
+          ("ndf", ("cells",), "1/sr", "each realization's NDF D(m), averaged over each sensor cell of normals m"),
+          ("vndf", ("masking_directions", "cells"), "1/sr", "its visible NDF D_wo(m) = G1(wo, m) <wo.m> D(m) / "
            "cos theta_o, averaged over each cell"),
-          ("g1", "masking directions", "", "the visible share of the facets' area projected towards wo"),
-          ("facing_area", "masking directions", "", "the facets' area projected towards wo, per tile area"),
-          ("g1_rays", "masking directions, cells", "", "shadow rays started on facets of normals in each cell"),
-          ("g1_free", "masking directions, cells", "", "those of them that left the surface: sum(g1_free) / "
+          ("g1", ("masking_directions",), "", "the visible share of the facets' area projected towards wo"),
+          ("facing_area", ("masking_directions",), "", "the facets' area projected towards wo, per tile area"),
+          ("g1_rays", ("masking_directions", "cells"), "", "shadow rays started on facets of normals in each cell"),
+          ("g1_free", ("masking_directions", "cells"), "", "those of them that left the surface: sum(g1_free) / "
            "sum(g1_rays) over the realizations is G1(wo, m)"))),
+)
+
+#: the root's coordinates (format 1.1): what xarray shows along the incidences and the cells,
+#: and the dimension scales (one per axis a table uses; netCDF's coordinate variables)
+COORDINATES = (
+    Dataset("theta_i", ("incidences",), "rad", "polar angle of each incidence: incidence/theta under a second "
+            "name (one dataset, hard-linked)", "format 1.1"),
+    Dataset("phi_i", ("incidences",), "rad", "azimuth of each incidence: incidence/phi under a second name",
+            "format 1.1"),
+    Dataset("theta_o", ("cells",), "rad", "polar angle of each cell's centre (sensor/direction; 0 for the cap)",
+            "format 1.1"),
+    Dataset("phi_o", ("cells",), "rad", "relative azimuth of each cell's centre", "format 1.1"),
+    Dataset("theta_o_bounds", ("cells", "bounds"), "rad", "each cell's polar bounds (sensor/theta_lo, theta_hi)",
+            "format 1.1"),
+    Dataset("phi_o_bounds", ("cells", "bounds"), "rad", "each cell's azimuth bounds (sensor/phi_lo, phi_hi)",
+            "format 1.1"),
+    *(Dataset(axis, (axis,), "", f"the dimension scale of axis {axis}: {SCALES[axis]}", "format 1.1, where a "
+              "dataset has the axis") for axis in AXIS_LENGTHS),
 )
 

@@ -10,6 +10,11 @@ whose metadata (headers, chunk indexes) carry checksums too, so damaged bytes fa
 and raises :class:`TableError` with one line naming the dataset otherwise; tables written before
 the checksums still load.
 
+The datasets are labelled for netCDF-4 readers (format 1.1, :mod:`microsim.netcdf`): each
+axis is a dimension scale of the root, each dataset has its CF units and long name, and the root
+holds the coordinates along the incidences and the cells, so that
+``xarray.open_dataset(path, engine="h5netcdf")`` gives named dimensions and coordinates.
+
 The file is written under a temporary name in the same directory and renamed when complete.
 """
 
@@ -26,7 +31,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from . import __version__, estimators, table_layout
+from . import __version__, estimators, netcdf, table_layout
 from .frames import direction
 from .orders import ORDERS
 from .sensor import Sensor
@@ -129,11 +134,72 @@ def write(path: str | Path, result, config, overwrite: bool = False) -> Path:
             for key in infos[0].keys() - plan.scene.keys():  # what varies between realizations
                 _store(scene, key, np.array([info[key] for info in infos]))
             scene.attrs["triangles"] = max(info["triangles"] for info in infos)
+            _store_coordinates(h5, sensor)
+            _label(h5)
         _publish(tmp, path, overwrite)
     finally:
         if tmp.exists():
             tmp.unlink()
     return path
+
+
+def _store_coordinates(h5: h5py.File, sensor: Sensor) -> None:
+    """The root's coordinates (table_layout.COORDINATES): the incidences' angles under a second
+    name, the cells' centres and bounds."""
+    h5["theta_i"], h5["phi_i"] = h5["incidence/theta"], h5["incidence/phi"]
+    theta_o, phi_o = sensor.cell_centres()
+    t_lo, t_hi, p_lo, p_hi = sensor.cell_bounds()
+    _store(h5, "theta_o", theta_o)
+    _store(h5, "phi_o", phi_o)
+    _store(h5, "theta_o_bounds", np.stack([t_lo, t_hi], axis=1))
+    _store(h5, "phi_o_bounds", np.stack([p_lo, p_hi], axis=1))
+
+
+def _label(h5: h5py.File) -> None:
+    """Label every dataset for netCDF-4 readers (:mod:`microsim.netcdf`): the dimension scales of
+    its declared axes, its units and long name, its standard error as an ancillary variable, and
+    at the root its coordinates."""
+    found = dict(netcdf.datasets(h5))
+    axes = {name: _axes_of(name, dataset.ndim) for name, dataset in found.items()}
+    sizes = {}
+    for name, dataset in found.items():
+        for axis, size in zip(axes[name], dataset.shape):
+            sizes.setdefault(axis, size)
+    scales = {axis: netcdf.dimension(h5, axis, _scale_values(axis, size), _store) for axis, size in sizes.items()}
+    for axis, scale in scales.items():
+        netcdf.describe(scale, "", DECLARED[axis].doc)
+    done = set()
+    for name, dataset in found.items():
+        if netcdf.address(dataset) in done:  # a second name of a dataset (theta_i)
+            continue
+        done.add(netcdf.address(dataset))
+        netcdf.attach(dataset, [scales[axis] for axis in axes[name]])
+        at_root = "/" not in name and name not in COORDINATE_NAMES
+        coordinates = " ".join(c for axis, c in (("incidences", "theta_i phi_i"), ("cells", "theta_o phi_o"))
+                               if at_root and axis in axes[name])
+        netcdf.describe(dataset, _declared(name).unit, _declared(name).doc,
+                        ancillary_variables=netcdf.ancillary(found, name), coordinates=coordinates,
+                        bounds=f"{name}_bounds" if f"{name}_bounds" in found else "")
+
+
+def _declared(name: str) -> table_layout.Dataset:
+    """The declaration of dataset ``name``: its own, or for what a scene counts, ``scene/<count>``."""
+    return DECLARED.get(name) or DECLARED["scene/<count>"]
+
+
+def _axes_of(name: str, ndim: int) -> tuple[str, ...]:
+    """The axes of dataset ``name`` as declared; for a scene count of more axes than declared,
+    the realizations and then axes of its own (``<leaf>_1``, ...)."""
+    axes = _declared(name).axes
+    if len(axes) == ndim:
+        return axes
+    leaf = name.rsplit("/", 1)[-1]
+    return ("realizations", *(f"{leaf}_{k}" for k in range(1, ndim)))
+
+
+def _scale_values(axis: str, size: int) -> np.ndarray:
+    """What the dimension scale of ``axis`` holds (table_layout.SCALES)."""
+    return np.arange(1, size + 1) if axis == "orders" else np.arange(size)
 
 
 def _publish(tmp: Path, path: Path, overwrite: bool) -> None:
@@ -212,8 +278,12 @@ class TableError(ValueError):
     """A damaged, incomplete or inconsistent table; the message is one line naming the dataset."""
 
 
-#: every dataset a table may hold (microsim.table_layout): the core ones, then each estimator's
-DATASETS = table_layout.CORE + estimators.datasets()
+#: every dataset a table may hold (microsim.table_layout): the core ones, each estimator's, then
+#: the root's coordinates and dimension scales
+DATASETS = table_layout.CORE + estimators.datasets() + table_layout.COORDINATES
+#: the declaration of each dataset, by HDF5 path
+DECLARED = {d.name: d for d in DATASETS}
+COORDINATE_NAMES = {d.name for d in table_layout.COORDINATES}
 #: axes of every dataset whose shape is known, by HDF5 path
 AXES = {d.name: d.axes for d in DATASETS if d.axes is not None}
 #: datasets every table has: brdf_order1_base only where there is a base, so it is checked when present
@@ -244,7 +314,7 @@ def load(path: str | Path) -> Table:
                          f"{table_layout.FORMAT_VERSION.split('.')[0]}.x")
     if scene is None:
         raise TableError("scene is missing")
-    _check(arrays)
+    _check(arrays, attrs.get("realizations"))
     sensor = Sensor.from_ring_counts(arrays["sensor/ring_counts"])
     _check_values(arrays, sensor)
     return Table(
@@ -278,8 +348,9 @@ def _read_datasets(group: h5py.Group, prefix: str = "") -> dict:
     return arrays
 
 
-def _check(arrays: dict) -> None:
-    """Raise TableError unless ``arrays`` hold every required dataset, consistently shaped, without NaN."""
+def _check(arrays: dict, realizations) -> None:
+    """Raise TableError unless ``arrays`` hold every required dataset, consistently shaped (the
+    scene's datasets: one row for each of the ``realizations``), without NaN."""
     missing = [name for name in REQUIRED if name not in arrays]
     if missing:
         raise TableError(f"{', '.join(missing)} {'is' if len(missing) == 1 else 'are'} missing")
@@ -294,11 +365,15 @@ def _check(arrays: dict) -> None:
     rings = arrays["sensor/retro_gamma_lo"].size if "sensor/retro_gamma_lo" in arrays else 0
     points = arrays["sensor/points_kind"].size if "sensor/points_kind" in arrays else 0
     sizes = {"incidences": theta.size, "cells": int(counts.sum()), "orders": ORDERS, "xyz": 3, "retro_rings": rings,
-             "points": points}
+             "points": points, "other_points": points, "rings": counts.size, "bounds": 2, "realizations": realizations}
     for name, axes in AXES.items():
-        expected = tuple(sizes[axis] for axis in axes)
-        if name in arrays and arrays[name].shape != expected:
-            raise TableError(f"{name} has shape {arrays[name].shape}, expected {expected} ({' x '.join(axes)})")
+        if name not in arrays:
+            continue
+        shape = arrays[name].shape
+        expected = tuple(sizes.get(axis, n) for axis, n in zip(axes, shape))  # masking directions: free
+        if len(shape) != len(axes) or shape != expected:
+            shown = tuple(sizes.get(axis, "any") for axis in axes)
+            raise TableError(f"{name} has shape {shape}, expected {shown} ({' x '.join(axes)})")
     for name, values in arrays.items():
         if values.dtype.kind == "f":
             if nan := np.count_nonzero(np.isnan(values)):

@@ -126,7 +126,7 @@ HOST_TOLERANCE = {"vcavities": 0.0, "vcavities_lambert": 0.0, "medium": 0.0, "co
 #: event counts, in square roots of the largest count (a count over the diverged paths)
 DIVERGING, COUNT_SPREAD = {"exact", "spheres"}, 5.0
 #: datasets of the table's layout (not traced), and the ulps numpy's SIMD functions may move them by
-LAYOUT, LAYOUT_ULPS = ("sensor/", "incidence/"), 8
+LAYOUT, LAYOUT_ULPS = ("sensor/", "incidence/", "theta_", "phi_"), 8
 
 
 def trace(name: str, directory: Path, **changes) -> dict:

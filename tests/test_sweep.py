@@ -36,15 +36,23 @@ GRID = BASE + """[sweep]
 VOLATILE = {"created_utc", "wall_time_s"}
 
 
+#: attributes that hold HDF5 object references (the dimension scales')
+REFERENCES = ("DIMENSION_LIST", "REFERENCE_LIST")
+
+
 def same_table(a, b) -> bool:
     """Whether two tables hold the same datasets (dtype, shape and bytes) and the same attributes
-    at every level, but for the provenance that differs between any two runs."""
+    at every level, but for the provenance that differs between any two runs. The dimension
+    scales' references (object addresses, which move with anything written before them) are
+    compared as the names of the scales each axis is attached to."""
     def contents(path):
         items = {}
         with h5py.File(path, "r") as h5:
             def visit(name, obj):
                 attrs = {k: np.asarray(v).tobytes() + str(np.asarray(v).dtype).encode() for k, v in obj.attrs.items()
-                         if not (name == "" and k in VOLATILE)}
+                         if not (name == "" and k in VOLATILE) and k not in REFERENCES}
+                if isinstance(obj, h5py.Dataset):
+                    attrs["dimensions"] = [[scale.name for scale in axis.values()] for axis in obj.dims]
                 data = (obj.dtype.str, obj.shape, obj[()].tobytes()) if isinstance(obj, h5py.Dataset) else None
                 items[name] = (attrs, data)
             visit("", h5)

@@ -66,11 +66,11 @@ class Points(Estimator):
                     when="sensor.directions_deg or sensor.retro_points_deg"),
         )
     ) + (
-        Dataset("brdf_points_covariance", ("incidences", "points", "points"), "1/sr^2", "covariance of the errors "
+        Dataset("brdf_points_covariance", ("incidences", "points", "other_points"), "1/sr^2", "covariance of the errors "
                 "of brdf_points between the points of each incidence (they share their paths), from the spread "
                 "of the realizations; its diagonal is brdf_points_stderr squared",
                 when="sensor.directions_deg or sensor.retro_points_deg"),
-        Dataset("brdf_points_order_covariance", ("incidences", "orders", "points", "points"), "1/sr^2",
+        Dataset("brdf_points_order_covariance", ("incidences", "orders", "points", "other_points"), "1/sr^2",
                 "brdf_points_covariance of each order", when="sensor.directions_deg or sensor.retro_points_deg"),
     ) + tuple(
         Dataset(f"sensor/points_{name}", axes, unit, doc, when="sensor.directions_deg or sensor.retro_points_deg")
