@@ -199,6 +199,33 @@ def _user_model_errors(text: str):
             from None
 
 
+@cli.command()
+@click.argument("table_path", metavar="TABLE.h5", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--format", "fmt", type=click.Choice(["merl", "netcdf-grid"]), required=True,
+              help="merl: the MERL database's binary (90 x 90 x 180 half/difference angles, three float64 "
+                   "channels); netcdf-grid: Eradiate's mqdiffuse layout, brdf(cos_theta_o, phi_d, cos_theta_i)")
+@click.option("--out", "out", type=click.Path(dir_okay=False, path_type=Path),
+              help="the file to write (default: TABLE with .binary or .nc)")
+@click.option("--force", is_flag=True, help="overwrite --out if it exists")
+def export(table_path, fmt, out, force):
+    """Write the BRDF of a full-BRDF table (illumination.incidences) in a format other tools read,
+    every node filled from its tabulated BRDF (microsim.tabulated); isotropic tables only."""
+    from . import exporters
+    from .tabulated import TabulatedBRDF
+
+    out = out if out is not None else table_path.with_suffix(exporters.SUFFIXES[fmt])
+    if out.exists() and not force:
+        raise BadInput(f"--out {out}: exists (pass --force to overwrite)")
+    if not out.parent.is_dir():
+        raise BadInput(f"--out {out}: no directory {out.parent}")
+    table = _load_table(table_path)
+    try:
+        exporters.export(TabulatedBRDF(table), fmt, out)
+    except ValueError as err:  # not a full BRDF, or anisotropic
+        raise BadInput(f"TABLE.h5: {table_path}: {err}") from None
+    click.echo(f"{fmt} written to {out}")
+
+
 #: compare's verdict, by its JSON value
 VERDICTS = {True: "consistent", False: "inconsistent", None: "n/a"}
 

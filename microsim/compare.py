@@ -90,6 +90,10 @@ QUADRATURE_TOLERANCE = 0.05
 ALBEDO_TOLERANCE = 1e-4
 QUADRATURE_RULES = (4, 8, 16, 32, 64, 128)
 SIGNAL_TO_NOISE = 3.0
+#: incidences of two tables within this (radians) are the same: their cells are compared one by one
+SAME_INCIDENCE = 1e-9
+#: the Gauss rule (nodes a side) averaging a tabulated BRDF over a cell of another table
+TABULATED_RULE = 16
 #: --order choice -> row of the table's brdf_order (None: all orders, the table's brdf; BASE: the
 #: part of order 1 scattered by the base, brdf_order1_base, in tables of scenes with a base)
 BASE = "base"
@@ -131,6 +135,13 @@ class Comparison:
     variance: np.ndarray
     kurtosis: np.ndarray
     common: np.ndarray
+    #: (n_i, m): the standard deviation, in each incidence's albedo difference, of m independent
+    #: scales common to every incidence (the realizations' of each table: the incidences of a
+    #: table share their geometry); None: none, the incidences independent
+    albedo_common: np.ndarray | None = None
+    #: whose errors ``stderr`` and ``variance`` hold beyond the table's (a tabulated model's:
+    #: :func:`compare_tables`, :func:`compare_tabulated`); None for an analytic model, exact
+    model_errors: str | None = None
 
     def metrics(self, i: int | None = None) -> dict:
         """The metrics of one incidence, or over all incidences (``i=None``)."""
@@ -142,7 +153,7 @@ class Comparison:
         chi2 = float(np.mean((m[ok] - s[ok]) ** 2 / v)) if z.size else float("nan")
         low, high = chi2_bounds(self.kurtosis[rows][ok], self.common[rows][ok])
         albedo_z = self.albedo_z()[rows]
-        albedo_limit = albedo_bound(albedo_z.size)
+        albedo_limit = albedo_bound(self.albedo_correlation()[rows, rows])
         out = {
             "cells_with_signal": int(ok.sum()),
             "median_abs_rel_err": float(np.median(np.abs(rel))) if rel.size else float("nan"),
@@ -166,10 +177,28 @@ class Comparison:
         return out
 
     def albedo_z(self) -> np.ndarray:
-        """(n_i,) (model's albedo - table's) / its standard error, the albedo quadrature's own
-        tolerance (ALBEDO_TOLERANCE of it) added in quadrature: a plane's albedo has no error."""
-        error = np.hypot(self.albedo_sim_stderr, ALBEDO_TOLERANCE * np.abs(self.albedo_model))
+        """(n_i,) (model's albedo - table's) / its standard error (:meth:`albedo_error`)."""
+        error = self.albedo_error()
         return (self.albedo_model - self.albedo_sim) / np.where(error > 0, error, np.inf)
+
+    def albedo_error(self) -> np.ndarray:
+        """(n_i,) the standard error of each albedo difference: the table's, and the albedo
+        quadrature's own tolerance (ALBEDO_TOLERANCE of it) in quadrature (a plane's albedo has
+        no error)."""
+        return np.hypot(self.albedo_sim_stderr, ALBEDO_TOLERANCE * np.abs(self.albedo_model))
+
+    def albedo_correlation(self) -> np.ndarray:
+        """(n_i, n_i) the correlation of the incidences' albedo z: their common scales'
+        (``albedo_common``) covariance over their errors, 1 on the diagonal."""
+        n = len(self.albedo_model)
+        if self.albedo_common is None:
+            return np.eye(n)
+        error = self.albedo_error()
+        scaled = np.divide(self.albedo_common, error[:, None], out=np.zeros_like(self.albedo_common),
+                           where=error[:, None] > 0)
+        correlation = np.clip(scaled @ scaled.T, -1.0, 1.0)
+        np.fill_diagonal(correlation, 1.0)
+        return correlation
 
     def as_dict(self) -> dict:
         return {
@@ -183,6 +212,7 @@ class Comparison:
                          f"model were right; bounds: {100 * (1 - CHI2_OUTSIDE):g} % two-sided; consistent: within "
                          f"them, and the mean albedo z^2 below its {100 * (1 - CHI2_OUTSIDE / 2):g} % point",
             "quadrature_max_change_in_stderr": self.quadrature_change,
+            **({"model_errors": self.model_errors} if self.model_errors else {}),
         }
 
 
@@ -421,10 +451,11 @@ def compare(table, model, order: str = "all", **params) -> Comparison:
     from .models import as_model
 
     model = as_model(model, **params)
+    if getattr(model, "name", None) == "table":
+        return compare_tables(table, model, order) if same_layout(table, model.table) else \
+            compare_tabulated(table, model, order)
     names, sim, stderr, albedo_sim, albedo_se = selection(table, order)
-    if not with_signal(sim, stderr).any():
-        raise ValueError(f"table {table.path}: no cell of order {order} has signal (a value above "
-                         f"{SIGNAL_TO_NOISE:g} standard errors): nothing to compare; trace more paths or use fewer cells")
+    signal = signal_or_refusal(table, sim, stderr, order)
     modelled = np.zeros_like(sim)
     worst = 0.0
     for i, wi in enumerate(table.wi):
@@ -432,12 +463,73 @@ def compare(table, model, order: str = "all", **params) -> Comparison:
         worst = max(worst, change)
     _require_finite(modelled, f"model {model!r}")
     p = table.projected_solid_angle
-    signal = with_signal(sim, stderr)
+    scale = realization_scale(sim, stderr, albedo_sim, albedo_se, p, table.paths, realizations(table))
     return Comparison(model.name, dict(model.values), order, table.theta_i, table.phi_i, modelled, sim, stderr,
                       signal, modelled @ p, albedo_sim, albedo_se, worst,
-                      *predicted_variance(modelled, sim, stderr, signal, p,
-                                          realization_scale(sim, stderr, albedo_sim, albedo_se, p, table.paths,
-                                                            realizations(table))))
+                      *predicted_variance(modelled, sim, stderr, signal, p, scale),
+                      albedo_common=(np.sqrt(scale) * albedo_sim)[:, None])
+
+
+def same_layout(table, other) -> bool:
+    """Whether two tables have the same sensor cells and the same incidences (to SAME_INCIDENCE)."""
+    return (np.array_equal(table.sensor.ring_counts, other.sensor.ring_counts)
+            and table.theta_i.shape == other.theta_i.shape
+            and np.allclose(table.theta_i, other.theta_i, rtol=0, atol=SAME_INCIDENCE)
+            and np.allclose(np.cos(table.phi_i - other.phi_i), 1.0, rtol=0, atol=SAME_INCIDENCE**2))
+
+
+def compare_tables(table, tabulated, order: str = "all") -> Comparison:
+    """Table against table, cell by cell (the tabulated model's table ``tabulated.table`` has
+    ``table``'s cells and incidences): each cell's difference over the variance both tables would
+    have if their BRDF were the mean of the two (:func:`table_noise.predicted_variance` of each,
+    summed: chi-square per cell 1 expected, 0 for a table against itself), the errors of both in
+    ``stderr`` and in the albedos'. The signal is ``table``'s; the orders compared, ``order`` of both."""
+    other = tabulated.table
+    names, sim, stderr, albedo_sim, albedo_se = selection(table, order)
+    _, values, values_se, albedo_values, albedo_values_se = selection(other, order)
+    signal = signal_or_refusal(table, sim, stderr, order)
+    p = table.projected_solid_angle
+    mean = 0.5 * (sim + values)
+    both = ((table, sim, stderr, albedo_sim, albedo_se), (other, values, values_se, albedo_values, albedo_values_se))
+    scales = [realization_scale(f, se, albedo, error, p, t.paths, realizations(t)) for t, f, se, albedo, error in both]
+    variance, kurtosis, common = table_noise.independent_sum(
+        *(predicted_variance(mean, f, se, with_signal(f, se), p, scale) for (_, f, se, _, _), scale in zip(both, scales)))
+    return Comparison("table", dict(tabulated.values), order, table.theta_i, table.phi_i, values, sim,
+                      np.hypot(stderr, values_se), signal, albedo_values, albedo_sim, np.hypot(albedo_se, albedo_values_se),
+                      0.0, variance, kurtosis, common,
+                      albedo_common=np.stack([np.sqrt(scale) * albedo for scale, (_, _, _, albedo, _) in zip(scales, both)],
+                                             axis=1),
+                      model_errors=f"both tables', cell by cell ({other.path} has {table.path}'s cells and incidences)")
+
+
+def compare_tabulated(table, tabulated, order: str = "all") -> Comparison:
+    """Table against a tabulated BRDF of other cells or incidences: the tabulated BRDF averaged
+    over ``table``'s cells (a fixed rule, :data:`TABULATED_RULE` nodes a side: the interpolant is
+    piecewise linear), its error propagated from its table's (microsim.tabulated) and added to
+    ``table``'s. Only all orders: the tabulated BRDF is its table's brdf."""
+    if order != "all":
+        raise ValueError(f"--order {order} with --model table: the tabulated BRDF is its table's brdf, all orders; "
+                         "cell by cell (the same sensor and incidences in both tables) compares any order")
+    names, sim, stderr, albedo_sim, albedo_se = selection(table, order)
+    signal = signal_or_refusal(table, sim, stderr, order)
+    p = table.projected_solid_angle
+    averaged, model_variance, common_b = np.zeros_like(sim), np.zeros_like(sim), np.zeros_like(sim)
+    albedo_model_variance, albedo_model_common = np.zeros(len(sim)), np.zeros(len(sim))
+    for i, wi in enumerate(table.wi):
+        rule = CellRule(table.sensor, wi, np.full(table.sensor.n_cells, TABULATED_RULE))
+        averaged[i], model_variance[i], common_b[i], albedo_model_variance[i], albedo_model_common[i] = \
+            tabulated.cell_average_noise(rule, p)
+    scale = realization_scale(sim, stderr, albedo_sim, albedo_se, p, table.paths, realizations(table))
+    modelled = (model_variance, np.zeros_like(sim), np.divide(common_b, model_variance, out=np.zeros_like(sim),
+                                                              where=model_variance > 0))
+    variance, kurtosis, common = table_noise.independent_sum(
+        predicted_variance(averaged, sim, stderr, signal, p, scale), modelled)
+    return Comparison("table", dict(tabulated.values), order, table.theta_i, table.phi_i, averaged, sim,
+                      np.sqrt(stderr**2 + model_variance), signal, averaged @ p, albedo_sim,
+                      np.sqrt(albedo_se**2 + albedo_model_variance), 0.0, variance, kurtosis, common,
+                      albedo_common=np.stack([np.sqrt(scale) * albedo_sim, albedo_model_common], axis=1),
+                      model_errors=f"both: {tabulated.table.path} interpolated to {table.path}'s cells and incidences, "
+                                   "its errors propagated (microsim.tabulated)")
 
 
 def compare_points(table, model, order: str = "all", **params) -> PointComparison:
@@ -556,12 +648,25 @@ def retro_sensor(table):
     return sensor
 
 
-def albedo_bound(incidences: int) -> float:
-    """Upper CHI2_OUTSIDE / 2 bound of the mean albedo z^2 over ``incidences`` (chi-square of that
-    many degrees of freedom, over their number) for an exact model."""
-    from scipy.stats import chi2
+def albedo_bound(correlation: np.ndarray) -> float:
+    """Upper CHI2_OUTSIDE / 2 bound of the mean albedo z^2 over incidences whose z have this
+    ``correlation`` (n x n) for an exact model: a sum of chi-squares of one degree of freedom
+    weighted by its eigenvalues, taken as the gamma distribution of mean 1 and variance
+    2 sum(rho^2) / n^2 (exact for independent incidences: chi-square of n degrees of freedom over n)."""
+    from scipy.stats import gamma
 
-    return float(chi2.ppf(1 - CHI2_OUTSIDE / 2, incidences) / incidences)
+    n = correlation.shape[0]
+    variance = 2.0 * float(np.sum(correlation**2)) / n**2
+    return float(gamma.ppf(1 - CHI2_OUTSIDE / 2, 1.0 / variance, scale=variance))
+
+
+def signal_or_refusal(table, sim, stderr, order: str) -> np.ndarray:
+    """:func:`with_signal` of the table's ``order``; ValueError (one line) if no cell has signal."""
+    signal = with_signal(sim, stderr)
+    if not signal.any():
+        raise ValueError(f"table {table.path}: no cell of order {order} has signal (a value above "
+                         f"{SIGNAL_TO_NOISE:g} standard errors): nothing to compare; trace more paths or use fewer cells")
+    return signal
 
 
 def with_signal(sim, stderr) -> np.ndarray:

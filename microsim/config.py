@@ -24,7 +24,9 @@ from pydantic import BaseModel, Field
 
 import geometry
 
+from . import full_brdf
 from .choices import BACKEND_CHOICES
+from .full_brdf import MAX_INCIDENCES
 from .materials import MATERIALS
 from .sensor import MAX_POINTS
 from .schema import Section
@@ -48,9 +50,17 @@ class Illumination(Section):
     ``theta_i_deg`` (one incidence per pair)."""
 
     theta_i_deg: list[Annotated[float, Field(ge=0.0, le=89.9)]] = Field(
-        min_length=1, max_length=256, description="polar angle of each incidence, deg (one table row each)")
+        min_length=1, max_length=MAX_INCIDENCES, description="polar angle of each incidence, deg (one table row each); "
+        "made by incidences where it is given")
     phi_i_deg: list[Annotated[float, Field(ge=-360.0, le=360.0)]] = Field(
-        [0.0], min_length=1, max_length=256, description="one azimuth for all incidences, or one per theta_i_deg")
+        [0.0], min_length=1, max_length=MAX_INCIDENCES,
+        description="one azimuth for all incidences, or one per theta_i_deg")
+    incidences: int | None = Field(
+        None, ge=2, le=MAX_INCIDENCES, description="a full BRDF: this many polar angles at the centres of the "
+        "sensor's rings, spread evenly from normal incidence to the last ring, instead of theta_i_deg "
+        "(microsim.full_brdf; what `--model table` and `microsim export` need)")
+    azimuths: int = Field(1, ge=1, le=64, description="with incidences: each polar angle but 0 at this many "
+                          "azimuths 360 j / azimuths (an anisotropic scene's full BRDF)")
 
     @pydantic.field_validator("theta_i_deg", mode="before")
     @classmethod
@@ -169,6 +179,12 @@ class Config(Section):
     illumination: Illumination
     sensor: SensorSection = SensorSection()
     run: Run
+
+    @pydantic.model_validator(mode="before")
+    @classmethod
+    def _full_brdf_incidences(cls, data):
+        """illumination.incidences made into theta_i_deg and phi_i_deg (microsim.full_brdf)."""
+        return full_brdf.expand(data)
 
     @pydantic.model_validator(mode="after")
     def _points_see_light(self):

@@ -114,6 +114,21 @@ def predicted_variance(model_values, sim, stderr, signal, projected, scale, at=N
     return variance, kurtosis, np.divide(common, variance, out=np.zeros_like(variance), where=variance > 0)
 
 
+def independent_sum(*parts) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(variance, excess kurtosis of the paths' part, realizations' share) of the difference of
+    independent estimates, each given as :func:`predicted_variance` gives it (two tables, or a
+    table and a tabulated BRDF): the variances add, the paths' parts' fourth cumulants add, and
+    the realizations' common scales add into one (a sum of independent normal scales common to
+    every cell is one such scale, exactly so where their ratio is the same in every cell)."""
+    variance = sum(v for v, _, _ in parts)
+    paths = [v * (1 - c) for v, _, c in parts]
+    path_total = sum(paths)
+    kurtosis = np.divide(sum(k * p**2 for (_, k, _), p in zip(parts, paths)), path_total**2,
+                         out=np.zeros_like(variance), where=path_total > 0)
+    common = np.divide(sum(v * c for v, _, c in parts), variance, out=np.zeros_like(variance), where=variance > 0)
+    return variance, kurtosis, common
+
+
 def chi2_bounds(kurtosis: np.ndarray, common: np.ndarray) -> tuple[float, float]:
     """Two-sided CHI2_OUTSIDE bounds of chi-square per cell for an exact model over cells of
     these excess kurtoses of the paths' part and realizations' shares (:func:`predicted_variance`):

@@ -7,8 +7,10 @@ arrays of shape (N, 3). :meth:`BRDFModel.__call__` handles broadcasting and the 
 
 from __future__ import annotations
 
+import importlib
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import ClassVar
 
 import numpy as np
@@ -19,7 +21,7 @@ class Param:
     """One model parameter: its domain, default and meaning.
 
     A numeric parameter lies in [lo, hi] (open ends when ``lo_open`` / ``hi_open``); a choice
-    parameter takes one of ``choices``. ``default=None`` means the parameter is required
+    parameter takes one of ``choices``; a ``text`` one, a path. ``default=None`` means the parameter is required
     (unless the model's :meth:`BRDFModel.resolve` derives it from another one), or, with
     ``optional=True``, that it may be left out: a key that only some settings take (a grain
     material's ``eta``), which ``resolve`` then requires, refuses or fills; left out and not
@@ -35,6 +37,8 @@ class Param:
     hi_open: bool = False
     choices: tuple[str, ...] | None = None
     optional: bool = False
+    #: a text parameter (a file's path), taken as it is given
+    text: bool = False
 
     def default_text(self) -> str:
         """The default as shown by ``microsim models``."""
@@ -46,6 +50,8 @@ class Param:
         """The accepted values, as shown in error messages and ``microsim models``."""
         if self.choices is not None:
             return "one of " + ", ".join(self.choices)
+        if self.text:
+            return "a path"
         left = "(" if self.lo_open else "["
         right = ")" if self.hi_open else "]"
         return f"{left}{_fmt(self.lo)}, {_fmt(self.hi)}{right}"
@@ -56,6 +62,10 @@ class Param:
             if value not in self.choices:
                 raise ValueError(f"{self.name} = {value!r} is not allowed; accepted: {self.describe()}")
             return value
+        if self.text:
+            if not isinstance(value, (str, Path)) or not str(value):
+                raise ValueError(f"{self.name} = {value!r} is not a path; accepted: {self.describe()}")
+            return str(value)
         if isinstance(value, str):
             try:
                 value = float(value)
@@ -154,6 +164,9 @@ def _unit(w, name: str) -> np.ndarray:
 
 
 _REGISTRY: dict[str, type[BRDFModel]] = {}
+#: models defined outside this package, by name -> the module that registers them on import (it
+#: imports this one: importing it from the package would be a circle)
+ELSEWHERE = {"table": "microsim.tabulated"}
 
 
 def register(cls: type[BRDFModel]) -> type[BRDFModel]:
@@ -164,11 +177,13 @@ def register(cls: type[BRDFModel]) -> type[BRDFModel]:
 
 def available() -> list[str]:
     """Names of the registered models."""
-    return sorted(_REGISTRY)
+    return sorted(_REGISTRY.keys() | ELSEWHERE.keys())
 
 
 def get(name: str) -> type[BRDFModel]:
     """The model class registered as ``name``."""
+    if name in ELSEWHERE and name not in _REGISTRY:
+        importlib.import_module(ELSEWHERE[name])
     try:
         return _REGISTRY[name]
     except KeyError:

@@ -1,0 +1,219 @@
+"""The tabulated BRDF (issue 29, items 2 and 3): a full-BRDF table read at any pair of
+directions, against its source (a plane's exact albedo / pi, a held-out incidence of Boolean
+spheres, its own albedos), table against table cell by cell, and its sampling against its pdf."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from scipy.stats import chi2 as chi2_distribution
+
+from microsim import compare, config, full_brdf, runner, table_noise, tables
+from microsim.cli import main
+from microsim.frames import direction
+from microsim.sensor import Sensor
+from microsim.tabulated import MAX_COS_GAP, TabulatedBRDF
+from refusals import assert_run_refused, small_config
+
+SPHERES = {
+    "scene": {"kind": "poisson_spheres", "volume_fraction": 0.3},
+    "material": {"kind": "lambert", "albedo": 0.8},
+    "sensor": {"cells": 400},
+}
+
+
+def traced(directory, name, illumination, paths, seed, base=SPHERES):
+    cfg = config.validate({**base, "illumination": illumination, "run": {"paths": paths, "realizations": 8,
+                                                                         "seed": seed}})
+    return tables.load(tables.write(directory / f"{name}.h5", runner.run(cfg), cfg))
+
+
+@pytest.fixture(scope="module")
+def full(tmp_path_factory):
+    """The full BRDF of Boolean spheres (phi = 0.3): 13 incidences at the 400-cell sensor's rings."""
+    return traced(tmp_path_factory.mktemp("full"), "full", {"incidences": 13}, 40_000, seed=1)
+
+
+def random_directions(n, rng, grazing=False):
+    mu = rng.random(n) * (0.05 if grazing else 1.0)
+    return direction(np.arccos(mu), rng.uniform(-np.pi, np.pi, n))
+
+
+def test_a_plane_table_tabulates_albedo_over_pi_everywhere(tmp_path):
+    """A Lambertian plane's table holds albedo / pi in every cell in expectation; its cells as a
+    run estimates them are noisy, so the plane's exact table (the same cells and incidences) is
+    tabulated: the interpolant is a convex combination of its cells, 1e-12 from albedo / pi at any
+    pair, and its pdf is the cosine's."""
+    plane = {"scene": {"kind": "plane"}, "material": {"kind": "lambert", "albedo": 0.6}, "sensor": {"cells": 400}}
+    table = traced(tmp_path, "plane", {"incidences": 13}, 2000, seed=1, base=plane)
+    exact = TabulatedBRDF(dataclasses.replace(table, brdf=np.full_like(table.brdf, 0.6 / np.pi)))
+    rng = np.random.default_rng(3)
+    wi = np.concatenate([random_directions(4000, rng), random_directions(1000, rng, grazing=True), [[0, 0, 1.0]] * 4])
+    wo = np.concatenate([random_directions(4000, rng), random_directions(1000, rng), random_directions(4, rng)])
+    np.testing.assert_allclose(exact(wi, wo), 0.6 / np.pi, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(exact.pdf(wi, wo), wo[:, 2] / np.pi, rtol=1e-12, atol=0)
+
+
+def test_the_tabulated_brdf_is_reciprocal_and_positive(full):
+    tabulated = TabulatedBRDF(full)
+    rng = np.random.default_rng(4)
+    wi, wo = random_directions(20_000, rng), random_directions(20_000, rng)
+    f, reverse = tabulated(wi, wo), tabulated(wo, wi)
+    assert np.all(f > 0)
+    np.testing.assert_allclose(f, reverse, rtol=1e-14, atol=0)
+
+
+def test_a_held_out_incidence_is_predicted_within_both_tables_errors(full, tmp_path):
+    """Incidences halfway between the full table's, traced with another seed: the tabulated BRDF
+    averaged over their cells (its errors propagated) is consistent with them, chi-square per cell
+    and albedos within their bounds. The interpolation's own error (docs/guide/tabulated.md:
+    0.8 % RMS at 13 incidences, halfway, lambert_sphere) is under these tables' noise (~30 % a
+    cell at 40 000 paths an incidence), so the bounds have no share of it."""
+    nodes = full_brdf.polar_angles_deg(13, 400)
+    halfway = [0.5 * (a + b) for a, b in zip(nodes[:-1], nodes[1:])][::2]
+    held_out = traced(tmp_path, "held", {"theta_i_deg": halfway, "phi_i_deg": 40.0}, 40_000, seed=2)
+    result = compare.compare(held_out, TabulatedBRDF(full))
+    overall = result.metrics()
+    assert result.model_errors.startswith("both:")
+    low, high = overall["chi2_bounds"]
+    assert low <= overall["chi2_per_cell"] <= high, overall
+    assert overall["albedo_z2"] <= overall["albedo_z2_bound"], overall
+
+
+def test_its_albedo_at_every_incidence_is_the_tables_within_errors(full):
+    """The tabulated BRDF averaged over the table's own cells at its own incidences: the albedos
+    differ by what the interpolation and the reciprocal average move, within the table's errors."""
+    result = compare.compare_tabulated(full, TabulatedBRDF(full))
+    z = (result.albedo_model - full.albedo) / full.albedo_stderr
+    assert np.all(np.abs(z) < 3.0), z
+
+
+def test_a_table_against_itself_gives_chi_square_zero(full):
+    overall = compare.compare(full, TabulatedBRDF(full)).metrics()
+    assert overall["chi2_per_cell"] == 0.0 and overall["albedo_z2"] == 0.0
+
+
+@pytest.mark.slow
+def test_two_seeds_agree_cell_by_cell_with_both_errors(full, tmp_path):
+    """Chi-square per cell over the variance of the difference (both tables' errors: twice one
+    table's, so 2 in units of one table's) is 1 in expectation."""
+    other = traced(tmp_path, "seed2", {"incidences": 13}, 40_000, seed=2)
+    result = compare.compare(full, TabulatedBRDF(other))
+    overall = result.metrics()
+    low, high = overall["chi2_bounds"]
+    assert low <= overall["chi2_per_cell"] <= high and overall["consistent"], overall
+    assert result.model_errors.startswith("both tables'")
+    # the errors a tabulated BRDF propagates from its table: the two seeds' tabulated BRDFs,
+    # averaged over the same cells, differ by what they say
+    first, second = TabulatedBRDF(full), TabulatedBRDF(other)
+    p = full.projected_solid_angle
+    chi2, commons, kurtoses = [], [], []
+    for wi in full.wi[::3]:
+        rule = compare.CellRule(full.sensor, wi, np.full(full.sensor.n_cells, 8))
+        (a, va, ca, _, _), (b, vb, cb, _, _) = first.cell_average_noise(rule, p), second.cell_average_noise(rule, p)
+        lit = (a > 0) & (b > 0)
+        chi2.append((a[lit] - b[lit]) ** 2 / (va[lit] + vb[lit]))
+        commons.append((ca[lit] + cb[lit]) / (va[lit] + vb[lit]))
+        kurtoses.append(np.zeros(lit.sum()))
+    low, high = table_noise.chi2_bounds(np.concatenate(kurtoses), np.concatenate(commons))
+    assert low <= np.mean(np.concatenate(chi2)) <= high, (np.mean(np.concatenate(chi2)), low, high)
+
+
+def test_sampling_follows_its_pdf(full):
+    """Directions sampled for an incidence between the table's, at an azimuth of its own, binned
+    in a grid of (cos^2 theta_o, phi_o) cells that cut across the sensor's: chi-square within its
+    two-sided 99 % bounds against the pdf's exact integral over each bin (the pdf is cos theta_o
+    times a constant in each sensor cell, turned by phi_i: each bin's share is the sum over the
+    sensor cells of their overlaps, in projected solid angle)."""
+    tabulated = TabulatedBRDF(full)
+    theta_i, phi_i, n = np.radians(37.0), 0.7, 200_000
+    rng = np.random.default_rng(5)
+    wi = np.tile(direction(theta_i, phi_i), (n, 1))
+    wo, pdf = tabulated.sample(wi, rng.random(n), rng.random((n, 2)))
+    assert np.all(pdf > 0)
+    np.testing.assert_allclose(pdf, tabulated.pdf(wi, wo), rtol=1e-12)
+    rows, columns = 10, 24
+    cos2 = np.clip(wo[:, 2], 0, 1) ** 2
+    phi = np.mod(np.arctan2(wo[:, 1], wo[:, 0]), 2 * np.pi)
+    observed = np.histogram2d(cos2, phi, bins=[np.linspace(0, 1, rows + 1), np.linspace(0, 2 * np.pi, columns + 1)])[0]
+    expected = n * bin_probabilities(tabulated, direction(theta_i, phi_i).reshape(1, 3), rows, columns)
+    assert abs(expected.sum() - n) < 1e-6 * n
+    statistic = np.sum((observed - expected) ** 2 / expected)
+    dof = rows * columns - 1
+    assert chi2_distribution.ppf(0.005, dof) <= statistic <= chi2_distribution.ppf(0.995, dof), statistic
+
+
+def bin_probabilities(tabulated, wi, rows, columns):
+    """The pdf's integral over each (cos^2 theta, phi) bin, exactly: sum over the sensor cells of
+    the incidences' shares times each cell's overlap with the bin over its own extent (both are
+    rectangles in cos^2 theta and phi, and the pdf is uniform in them within a cell)."""
+    incidence, weight = tabulated.grid.weights(np.array([wi[0, 2]]), np.array([np.arctan2(wi[0, 1], wi[0, 0])]))
+    share = weight[0] @ tabulated.share[incidence[0]]
+    phi_i = np.arctan2(wi[0, 1], wi[0, 0])
+    lo2, hi2 = tabulated.cos2_hi, tabulated.cos2_lo  # cos^2 runs opposite to theta
+    p_lo, p_hi = tabulated.phi_lo + phi_i, tabulated.phi_hi + phi_i
+    c_edges, p_edges = np.linspace(0, 1, rows + 1), np.linspace(0, 2 * np.pi, columns + 1)
+    out = np.zeros((rows, columns))
+    for r in range(rows):
+        dc = np.clip(np.minimum(hi2, c_edges[r + 1]) - np.maximum(lo2, c_edges[r]), 0, None) / (hi2 - lo2)
+        for c in range(columns):
+            dp = sum(np.clip(np.minimum(p_hi + k, p_edges[c + 1]) - np.maximum(p_lo + k, p_edges[c]), 0, None)
+                     for k in (-2 * np.pi, 0.0, 2 * np.pi, 4 * np.pi)) / (p_hi - p_lo)
+            out[r, c] = np.sum(share * dc * dp)
+    return out
+
+
+def test_a_table_of_too_few_incidences_is_refused_in_one_line(full, tmp_path, capsys):
+    few = traced(tmp_path, "few", {"theta_i_deg": [0.0, 30.0, 60.0, 85.0]}, 2000, seed=1)
+    assert main(["compare", str(full.path), "--model", "table", "--param", f"path={few.path}"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not a full BRDF" in err[0] and f"at most {MAX_COS_GAP:g}" in err[0] \
+        and "illumination.incidences" in err[0], err
+
+
+@pytest.mark.parametrize("value, words", [("missing.h5", "no such file"), ("config.toml", "not a microsim table")])
+def test_a_missing_or_foreign_file_is_refused_in_one_line(full, tmp_path, capsys, value, words):
+    (tmp_path / "config.toml").write_text("[scene]\n")
+    assert main(["compare", str(full.path), "--model", "table", "--param", f"path={tmp_path / value}"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and words in err[0] and "path" in err[0], err
+
+
+def test_incidences_are_centres_of_the_sensors_rings_spread_evenly():
+    cfg = config.validate({**SPHERES, "illumination": {"incidences": 7}, "run": {"paths": 1000}})
+    centres = np.degrees(Sensor.build(400).ring_centres())
+    assert Sensor.build(400).n_rings == 13
+    np.testing.assert_array_equal(cfg.illumination.theta_i_deg, centres[[0, 2, 4, 6, 8, 10, 12]])
+    assert cfg.illumination.phi_i_deg == [0.0] * 7
+    tilted = config.validate({**SPHERES, "illumination": {"incidences": 7, "azimuths": 4}, "run": {"paths": 1000}})
+    assert len(tilted.illumination.theta_i_deg) == 1 + 6 * 4
+    assert sorted(set(tilted.illumination.phi_i_deg)) == [0.0, 90.0, 180.0, 270.0]
+
+
+def test_an_anisotropic_table_is_read_on_its_grid_of_polar_angles_and_azimuths(tmp_path):
+    """Incidences at 3 azimuths: interpolated in phi_i too, periodically; a constant table gives
+    its constant back, and the tabulated BRDF is reciprocal."""
+    table = traced(tmp_path, "grid", {"incidences": 13, "azimuths": 3}, 2000, seed=1)
+    tabulated = TabulatedBRDF(table)
+    assert tabulated.grid.anisotropic and tabulated.grid.index.shape == (13, 3)
+    rng = np.random.default_rng(6)
+    wi, wo = random_directions(5000, rng), random_directions(5000, rng)
+    np.testing.assert_allclose(tabulated(wi, wo), tabulated(wo, wi), rtol=1e-14, atol=0)
+    constant = TabulatedBRDF(dataclasses.replace(table, brdf=np.full_like(table.brdf, 0.2)))
+    np.testing.assert_allclose(constant(wi, wo), 0.2, rtol=1e-12, atol=0)
+    # at a traced incidence the interpolation in phi_i puts all its weight there
+    incidence, weight = tabulated.grid.weights(np.cos(table.theta_i[5:9]), table.phi_i[5:9])
+    np.testing.assert_allclose(np.max(weight, axis=1), 1.0, rtol=0, atol=1e-12)
+    assert np.array_equal(incidence[np.arange(4), np.argmax(weight, axis=1)], np.arange(5, 9))
+
+
+@pytest.mark.parametrize("illumination, key, words", [
+    ('incidences = 20', "illumination.incidences", ("13 rings", "sensor.cells = 400", "2 to 13")),
+    ('incidences = 7\ntheta_i_deg = [30.0]', "illumination.theta_i_deg", ("incidences",)),
+    ('theta_i_deg = [30.0]\nazimuths = 4', "illumination.azimuths", ("only with illumination.incidences",)),
+    ('incidences = 1', "illumination.incidences", ("2",)),
+])
+def test_a_full_brdf_config_that_cannot_be_traced_is_refused(tmp_path, capsys, illumination, key, words):
+    text = small_config('kind = "plane"').replace("theta_i_deg = [30.0]", illumination).replace("cells = 100",
+                                                                                                "cells = 400")
+    assert_run_refused(text, key, tmp_path, capsys, *words)
