@@ -226,6 +226,56 @@ def export(table_path, fmt, out, force):
     click.echo(f"{fmt} written to {out}")
 
 
+@cli.command("render")
+@click.argument("table_path", metavar="TABLE.h5", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--model", "model_name", help="a model to render beside the table: " + MODEL_HELP)
+@click.option("--param", "params", multiple=True, metavar="KEY=VALUE", help="model parameter, repeatable")
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False, path_type=Path), help="the PNG to write")
+@click.option("--force", is_flag=True, help="overwrite --out if it exists")
+@click.option("--size", type=click.IntRange(16, 4096), default=256, show_default=True, help="pixels a side")
+@click.option("--spp", type=click.IntRange(1, 65536), default=64, show_default=True, help="samples a pixel")
+@click.option("--mesh", type=click.Path(dir_okay=False, path_type=Path),
+              help="render this mesh (.ply, .obj; centred and scaled to the unit sphere) instead of the sphere")
+def render_command(table_path, model_name, params, out, force, size, spp, mesh):
+    """Render a full-BRDF table on a sphere under a directional light and a constant environment,
+    beside a model and their relative difference (Mitsuba 3: pip install 'microsim[render]')."""
+    from .tabulated import TabulatedBRDF
+
+    if out.exists() and not force:
+        raise BadInput(f"--out {out}: exists (pass --force to overwrite)")
+    if not out.parent.is_dir():
+        raise BadInput(f"--out {out}: no directory {out.parent}")
+    if params and model_name is None:
+        raise BadInput("--param: give --model, the model they are parameters of")
+    if mesh is not None and (not mesh.is_file() or mesh.suffix.lower() not in (".ply", ".obj")):
+        raise BadInput(f"--mesh {mesh}: {'not found' if not mesh.is_file() else 'accepted: a .ply or .obj file'}")
+    try:
+        from . import mitsuba, render
+    except ImportError as err:
+        raise BadInput(f"render: {err}") from None
+    try:
+        mitsuba.load()
+    except ImportError as err:
+        raise BadInput(f"render: {err}") from None
+    table = _load_table(table_path)
+    try:
+        tabulated = TabulatedBRDF(table)
+    except ValueError as err:
+        raise BadInput(f"TABLE.h5: {table_path}: {err}") from None
+    model = None
+    if model_name is not None:
+        with _user_model_errors(model_name):
+            try:
+                model = _model_class(model_name)(**_model_parameters(params))
+            except ValueError as err:
+                raise BadInput(f"--model {model_name}: {err}") from None
+    with _user_model_errors(model_name or ""):
+        images = render.comparison(mitsuba.bsdf(tabulated), None if model is None else mitsuba.bsdf(model),
+                                   size=size, spp=spp, mesh=mesh)
+    render.figure(images, out, (f"table {table_path.name}", repr(model)))
+    click.echo(f"render written to {out} (Mitsuba {mitsuba.variant()}, {size} x {size}, {spp} samples a pixel)")
+
+
 #: compare's verdict, by its JSON value
 VERDICTS = {True: "consistent", False: "inconsistent", None: "n/a"}
 
