@@ -260,6 +260,7 @@ def render_command(table_path, model_name, params, out, force, size, spp, mesh):
     table = _load_table(table_path)
     try:
         tabulated = TabulatedBRDF(table)
+        tabulated.require_full_brdf()
     except ValueError as err:
         raise BadInput(f"TABLE.h5: {table_path}: {err}") from None
     model = None

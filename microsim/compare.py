@@ -83,6 +83,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import table_noise
+from .tables import realizations
 from .table_noise import (CHI2_OUTSIDE, chi2_1dof_p, chi2_bounds, hotelling, normal_squares, predicted_variance,
                           realization_scale)
 
@@ -139,6 +140,9 @@ class Comparison:
     #: scales common to every incidence (the realizations' of each table: the incidences of a
     #: table share their geometry); None: none, the incidences independent
     albedo_common: np.ndarray | None = None
+    #: (n_i,) the sum over pairs of distinct cells with signal of each incidence of their errors'
+    #: squared correlation (a tabulated model's cells share its table's values); None: 0
+    correlated: np.ndarray | None = None
     #: whose errors ``stderr`` and ``variance`` hold beyond the table's (a tabulated model's:
     #: :func:`compare_tables`, :func:`compare_tabulated`); None for an analytic model, exact
     model_errors: str | None = None
@@ -151,7 +155,8 @@ class Comparison:
         z = (m[ok] - s[ok]) / e[ok]
         v = self.variance[rows][ok]
         chi2 = float(np.mean((m[ok] - s[ok]) ** 2 / v)) if z.size else float("nan")
-        low, high = chi2_bounds(self.kurtosis[rows][ok], self.common[rows][ok])
+        correlated = 0.0 if self.correlated is None else float(np.sum(self.correlated[rows]))
+        low, high = chi2_bounds(self.kurtosis[rows][ok], self.common[rows][ok], correlated)
         albedo_z = self.albedo_z()[rows]
         albedo_limit = albedo_bound(self.albedo_correlation()[rows, rows])
         out = {
@@ -475,7 +480,7 @@ def same_layout(table, other) -> bool:
     return (np.array_equal(table.sensor.ring_counts, other.sensor.ring_counts)
             and table.theta_i.shape == other.theta_i.shape
             and np.allclose(table.theta_i, other.theta_i, rtol=0, atol=SAME_INCIDENCE)
-            and np.allclose(np.cos(table.phi_i - other.phi_i), 1.0, rtol=0, atol=SAME_INCIDENCE**2))
+            and np.all(np.abs(np.mod(table.phi_i - other.phi_i + np.pi, 2 * np.pi) - np.pi) < SAME_INCIDENCE))
 
 
 def compare_tables(table, tabulated, order: str = "all") -> Comparison:
@@ -485,7 +490,7 @@ def compare_tables(table, tabulated, order: str = "all") -> Comparison:
     summed: chi-square per cell 1 expected, 0 for a table against itself), the errors of both in
     ``stderr`` and in the albedos'. The signal is ``table``'s; the orders compared, ``order`` of both."""
     other = tabulated.table
-    names, sim, stderr, albedo_sim, albedo_se = selection(table, order)
+    _, sim, stderr, albedo_sim, albedo_se = selection(table, order)
     _, values, values_se, albedo_values, albedo_values_se = selection(other, order)
     signal = signal_or_refusal(table, sim, stderr, order)
     p = table.projected_solid_angle
@@ -510,24 +515,25 @@ def compare_tabulated(table, tabulated, order: str = "all") -> Comparison:
     if order != "all":
         raise ValueError(f"--order {order} with --model table: the tabulated BRDF is its table's brdf, all orders; "
                          "cell by cell (the same sensor and incidences in both tables) compares any order")
-    names, sim, stderr, albedo_sim, albedo_se = selection(table, order)
+    _, sim, stderr, albedo_sim, albedo_se = selection(table, order)
     signal = signal_or_refusal(table, sim, stderr, order)
     p = table.projected_solid_angle
-    averaged, model_variance, common_b = np.zeros_like(sim), np.zeros_like(sim), np.zeros_like(sim)
-    albedo_model_variance, albedo_model_common = np.zeros(len(sim)), np.zeros(len(sim))
-    for i, wi in enumerate(table.wi):
-        rule = CellRule(table.sensor, wi, np.full(table.sensor.n_cells, TABULATED_RULE))
-        averaged[i], model_variance[i], common_b[i], albedo_model_variance[i], albedo_model_common[i] = \
-            tabulated.cell_average_noise(rule, p)
+    noise = [tabulated.cell_average_noise(CellRule(table.sensor, wi, np.full(table.sensor.n_cells, TABULATED_RULE)), p)
+             for wi in table.wi]
+    averaged, model_variance, common_b = (np.array([getattr(n, k) for n in noise]) for k in
+                                          ("averages", "variance", "common"))
     scale = realization_scale(sim, stderr, albedo_sim, albedo_se, p, table.paths, realizations(table))
     modelled = (model_variance, np.zeros_like(sim), np.divide(common_b, model_variance, out=np.zeros_like(sim),
                                                               where=model_variance > 0))
     variance, kurtosis, common = table_noise.independent_sum(
         predicted_variance(averaged, sim, stderr, signal, p, scale), modelled)
+    correlated = np.array([table_noise.correlated_pairs(n.covariance, variance[i], signal[i])
+                           for i, n in enumerate(noise)])
     return Comparison("table", dict(tabulated.values), order, table.theta_i, table.phi_i, averaged, sim,
                       np.sqrt(stderr**2 + model_variance), signal, averaged @ p, albedo_sim,
-                      np.sqrt(albedo_se**2 + albedo_model_variance), 0.0, variance, kurtosis, common,
-                      albedo_common=np.stack([np.sqrt(scale) * albedo_sim, albedo_model_common], axis=1),
+                      np.sqrt(albedo_se**2 + np.array([n.albedo_variance for n in noise])), 0.0, variance,
+                      kurtosis, common, correlated=correlated,
+                      albedo_common=np.stack([np.sqrt(scale) * albedo_sim, [n.albedo_common for n in noise]], axis=1),
                       model_errors=f"both: {tabulated.table.path} interpolated to {table.path}'s cells and incidences, "
                                    "its errors propagated (microsim.tabulated)")
 
@@ -539,6 +545,7 @@ def compare_points(table, model, order: str = "all", **params) -> PointCompariso
     from .models import as_model
 
     model = as_model(model, **params)
+    _refuse_tabulated(model, "--points")
     sim, stderr = extra_selection(table, order, "points")
     directions = table.arrays["sensor/points_direction"]
     modelled = np.stack([model(np.broadcast_to(wi, d.shape), d) for wi, d in zip(table.wi, directions)])
@@ -574,6 +581,7 @@ def compare_retro(table, model, order: str = "all", **params) -> PointComparison
     from .models import as_model
 
     model = as_model(model, **params)
+    _refuse_tabulated(model, "--retro")
     sim, stderr = extra_selection(table, order, "retro")
     sensor = retro_sensor(table)
     projected = table.arrays["sensor/retro_projected_solid_angle"]
@@ -660,6 +668,13 @@ def albedo_bound(correlation: np.ndarray) -> float:
     return float(gamma.ppf(1 - CHI2_OUTSIDE / 2, 1.0 / variance, scale=variance))
 
 
+def _refuse_tabulated(model, flag: str) -> None:
+    """ValueError (one line) for a tabulated model where its errors are not propagated."""
+    if getattr(model, "name", None) == "table":
+        raise ValueError(f"{flag} with --model table: the tabulated BRDF's errors are propagated to cells only "
+                         "(compare the cells, or the two tables' points as tables of their own)")
+
+
 def signal_or_refusal(table, sim, stderr, order: str) -> np.ndarray:
     """:func:`with_signal` of the table's ``order``; ValueError (one line) if no cell has signal."""
     signal = with_signal(sim, stderr)
@@ -738,11 +753,6 @@ def repeated_points(directions: np.ndarray) -> np.ndarray:
     gap = np.linalg.norm(directions[:, :, None] - directions[:, None, :], axis=-1)
     earlier = np.tril(np.ones(gap.shape[1:], bool), -1)
     return np.any((gap < 1e-12) & earlier, axis=2)
-
-
-def realizations(table) -> int:
-    """The realizations a table's standard errors come from."""
-    return int(table.attrs.get("realizations", 2))
 
 
 def _selected(table, row):

@@ -58,9 +58,10 @@ class Illumination(Section):
     incidences: int | None = Field(
         None, ge=2, le=MAX_INCIDENCES, description="a full BRDF: this many polar angles at the centres of the "
         "sensor's rings, spread evenly from normal incidence to the last ring, instead of theta_i_deg "
-        "(microsim.full_brdf; what `--model table` and `microsim export` need)")
-    azimuths: int = Field(1, ge=1, le=64, description="with incidences: each polar angle but 0 at this many "
-                          "azimuths 360 j / azimuths (an anisotropic scene's full BRDF)")
+        "(microsim.full_brdf; what `--model table` and `microsim export` need: cos theta_i gaps of 0.25 at most, "
+        "about 7 incidences or more)")
+    azimuths: int | None = Field(None, ge=1, le=64, description="with incidences: each polar angle but 0 at this "
+                                 "many azimuths 360 j / azimuths (an anisotropic scene's full BRDF; 1 if left out)")
 
     @pydantic.field_validator("theta_i_deg", mode="before")
     @classmethod
@@ -184,7 +185,7 @@ class Config(Section):
     @classmethod
     def _full_brdf_incidences(cls, data):
         """illumination.incidences made into theta_i_deg and phi_i_deg (microsim.full_brdf)."""
-        return full_brdf.expand(data)
+        return full_brdf.expand(data, SensorSection.model_fields["cells"].default)
 
     @pydantic.model_validator(mode="after")
     def _points_see_light(self):

@@ -23,14 +23,13 @@ Files are written under a temporary name and renamed when complete.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import h5py
 import numpy as np
 
 from . import __version__, netcdf
+from .files import atomic
 from .frames import direction
 
 #: MERL's bins: theta_h, theta_d, phi_d
@@ -47,22 +46,13 @@ SUFFIXES = {"merl": ".binary", "netcdf-grid": ".nc"}
 
 def export(tabulated, fmt: str, out: Path) -> Path:
     """Write ``tabulated`` (a :class:`~microsim.tabulated.TabulatedBRDF`) in format ``fmt`` to
-    ``out``, atomically; ValueError (one line) for an anisotropic table."""
+    ``out``, atomically; ValueError (one line) for a table that is not a full BRDF, or anisotropic."""
+    tabulated.require_full_brdf()
     if tabulated.grid.anisotropic:
         raise ValueError(f"--format {fmt}: {tabulated.path} is anisotropic (incidences at {tabulated.grid.phi.size} "
                          "azimuths); the format holds isotropic BRDFs (f of theta_i, theta_o and phi_o - phi_i)")
-    handle, name = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
-    os.close(handle)
-    tmp = Path(name)
-    try:
+    with atomic(out) as tmp:
         WRITERS[fmt](tabulated, tmp)
-        umask = os.umask(0)
-        os.umask(umask)
-        tmp.chmod(0o666 & ~umask)
-        os.replace(tmp, out)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return out
 
 

@@ -17,6 +17,9 @@ from .sensor import Sensor
 
 #: the most incidences a run traces (illumination.theta_i_deg's longest list)
 MAX_INCIDENCES = 256
+#: the largest polar angle of an incidence (illumination.theta_i_deg's bound): the last ring's
+#: centre of a sensor of more than about 600 000 cells lies beyond it, and is held there
+MAX_THETA_DEG = 89.9
 
 
 def polar_angles_deg(incidences: int, cells: int) -> list[float]:
@@ -27,7 +30,7 @@ def polar_angles_deg(incidences: int, cells: int) -> list[float]:
         raise ValueError(f"illumination.incidences = {incidences}: more than the {centres.size} rings of sensor.cells "
                          f"= {cells} (one incidence a ring); accepted: 2 to {centres.size}, or more sensor.cells")
     rings = np.round(np.linspace(0, centres.size - 1, incidences)).astype(int)
-    return [float(d) for d in np.degrees(centres[rings])]
+    return [min(float(d), MAX_THETA_DEG) for d in np.degrees(centres[rings])]
 
 
 def incidences_deg(incidences: int, azimuths: int, cells: int) -> tuple[list[float], list[float]]:
@@ -44,20 +47,22 @@ def incidences_deg(incidences: int, azimuths: int, cells: int) -> tuple[list[flo
     return thetas, phis
 
 
-def expand(data):
+def expand(data, default_cells: int):
     """The config dictionary ``data`` with ``illumination.theta_i_deg`` and ``phi_i_deg`` made from
     ``illumination.incidences`` and ``azimuths`` (a config that names them both must give the
     same angles: a table's stored config does); left as it is if it has no ``incidences``.
-    ValueError (one line) for a config that cannot be expanded."""
+    ValueError (one line) for a config that cannot be expanded; ``default_cells``: sensor.cells
+    where the config does not give it."""
     illumination = data.get("illumination") if isinstance(data, dict) else None
     if not isinstance(illumination, dict) or "incidences" not in illumination:
         if isinstance(illumination, dict) and "azimuths" in illumination:
             raise ValueError("illumination.azimuths: only with illumination.incidences (a full BRDF); give "
                              "phi_i_deg for the azimuths of theta_i_deg")
         return data
-    n, m = illumination["incidences"], illumination.get("azimuths", 1)
+    n, m = illumination["incidences"], illumination.get("azimuths")
+    m = 1 if m is None else m
     sensor = data.get("sensor", {})
-    cells = sensor.get("cells", 3240) if isinstance(sensor, dict) else 3240
+    cells = sensor.get("cells", default_cells) if isinstance(sensor, dict) else default_cells
     for key, value, least in (("incidences", n, 2), ("azimuths", m, 1)):
         if not isinstance(value, int) or isinstance(value, bool) or value < least:
             raise ValueError(f"illumination.{key} = {value!r}: accepted: a whole number, at least {least}"

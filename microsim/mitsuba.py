@@ -65,7 +65,9 @@ def _model_of(props):
     from .tabulated import TabulatedBRDF
 
     if "filename" in props:
-        return TabulatedBRDF(str(props["filename"]))
+        tabulated = TabulatedBRDF(str(props["filename"]))
+        tabulated.require_full_brdf()
+        return tabulated
     if "model" not in props:
         raise ValueError("BSDF microsim: give filename (a table) or model (a registered model's name)")
     return models.create(str(props["model"]), **{key: props[key] for key in props.keys() if key != "model"})

@@ -10,13 +10,12 @@ one bounce (the sphere cannot see itself), the same seed for table and model.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from . import mitsuba as plugin
+from .files import atomic
 
 #: where the directional light comes from (a direction towards it), in the camera's frame: the
 #: camera looks down -z at the object
@@ -123,16 +122,9 @@ def figure(images: dict, out: Path, labels: tuple[str, str]) -> Path:
         axis.set_xticks([])
         axis.set_yticks([])
     fig.tight_layout()
-    handle, name = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".png", dir=out.parent)
-    os.close(handle)
     try:
-        fig.savefig(name, dpi=110)
-        umask = os.umask(0)
-        os.umask(umask)
-        Path(name).chmod(0o666 & ~umask)
-        os.replace(name, out)
+        with atomic(out, suffix=".png") as tmp:
+            fig.savefig(tmp, dpi=110)
     finally:
         plt.close(fig)
-        if Path(name).exists():
-            Path(name).unlink()
     return out

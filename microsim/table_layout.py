@@ -109,8 +109,8 @@ CORE = (
     Dataset("incidence/phi", ("incidences",), "rad", "azimuth of each incidence wi", required=True),
     *(Dataset(f"sensor/{name}", ("cells",), "rad", doc, required=True) for name, doc in (
         ("theta_lo", "lower polar bound of each cell"), ("theta_hi", "upper polar bound of each cell"),
-        ("phi_lo", "lower azimuth bound of each cell (relative azimuth; cells of a ring are centred on "
-                   "phi = 2 pi j / n)"),
+        ("phi_lo", "lower azimuth bound of each cell, in the scene's frame (the relative azimuth of an "
+                   "incidence at phi_i = 0; cells of a ring are centred on phi = 2 pi j / n)"),
         ("phi_hi", "upper azimuth bound of each cell"))),
     Dataset("sensor/direction", ("cells", "xyz"), "", "unit vector of each cell's centre", required=True),
     Dataset("sensor/solid_angle", ("cells",), "sr", "solid angle of each cell", required=True),
@@ -149,7 +149,8 @@ COORDINATES = (
             "format 1.1"),
     Dataset("theta_o", ("cells",), "rad", "polar angle of each cell's centre (sensor/direction; 0 for the cap)",
             "format 1.1"),
-    Dataset("phi_o", ("cells",), "rad", "relative azimuth of each cell's centre", "format 1.1"),
+    Dataset("phi_o", ("cells",), "rad", "azimuth of each cell's centre, in the scene's frame (the relative azimuth "
+            "phi_o - phi_i where phi_i = 0)", "format 1.1"),
     Dataset("theta_o_bounds", ("cells", "bounds"), "rad", "each cell's polar bounds (sensor/theta_lo, theta_hi)",
             "format 1.1"),
     Dataset("phi_o_bounds", ("cells", "bounds"), "rad", "each cell's azimuth bounds (sensor/phi_lo, phi_hi)",

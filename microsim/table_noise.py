@@ -129,17 +129,31 @@ def independent_sum(*parts) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return variance, kurtosis, common
 
 
-def chi2_bounds(kurtosis: np.ndarray, common: np.ndarray) -> tuple[float, float]:
+def correlated_pairs(covariance, variance: np.ndarray, signal: np.ndarray) -> float:
+    """The sum over pairs of distinct cells with ``signal`` of (covariance / sqrt(v v'))^2, for
+    :func:`chi2_bounds`: ``covariance`` (a sparse matrix over the cells) of a part of their
+    errors, ``variance`` their whole variance."""
+    chosen = np.flatnonzero(signal & (variance > 0))
+    part = covariance.tocsr()[chosen][:, chosen].tocoo()
+    off = part.row != part.col
+    scaled = part.data[off] / np.sqrt(variance[chosen][part.row[off]] * variance[chosen][part.col[off]])
+    return float(np.sum(scaled**2))
+
+
+def chi2_bounds(kurtosis: np.ndarray, common: np.ndarray, correlated: float = 0.0) -> tuple[float, float]:
     """Two-sided CHI2_OUTSIDE bounds of chi-square per cell for an exact model over cells of
     these excess kurtoses of the paths' part and realizations' shares (:func:`predicted_variance`):
-    the gamma distribution of mean 1 and their variance (module doc)."""
+    the gamma distribution of mean 1 and their variance (module doc). ``correlated``: the sum over
+    pairs of distinct cells of their errors' squared correlation beyond the common scale (0 for
+    one table's cells; a tabulated BRDF's cells share its table's values), which adds
+    2 ``correlated`` / n^2 to the variance (normal errors: Var sum z^2 = 2 sum rho^2)."""
     from scipy.stats import gamma
 
     n = kurtosis.size
     if n == 0:
         return float("nan"), float("nan")
-    variance = (np.sum((1 - common) ** 2 * (2 + kurtosis)) + 4 * np.sum(common * (1 - common))) / n**2 \
-        + 2 * float(np.mean(common)) ** 2
+    variance = (np.sum((1 - common) ** 2 * (2 + kurtosis)) + 2 * correlated + 4 * np.sum(common * (1 - common))) \
+        / n**2 + 2 * float(np.mean(common)) ** 2
     shape = 1.0 / variance
     low, high = gamma.ppf([CHI2_OUTSIDE / 2, 1 - CHI2_OUTSIDE / 2], shape, scale=1.0 / shape)
     return float(low), float(high)

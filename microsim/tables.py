@@ -158,43 +158,57 @@ def _store_coordinates(h5: h5py.File, sensor: Sensor) -> None:
 def _label(h5: h5py.File) -> None:
     """Label every dataset for netCDF-4 readers (:mod:`microsim.netcdf`): the dimension scales of
     its declared axes, its units and long name, its standard error as an ancillary variable, and
-    at the root its coordinates."""
+    at the root its coordinates. A dataset no one declared (an estimator registered without its
+    ``DATASETS``) gets axes of its own, ``<name>_0``, ... and no unit: the table is written all
+    the same."""
+    declared = {d.name: d for d in declarations()}
     found = dict(netcdf.datasets(h5))
-    axes = {name: _axes_of(name, dataset.ndim) for name, dataset in found.items()}
+    axes = {name: _axes_of(name, dataset.ndim, declared) for name, dataset in found.items()}
     sizes = {}
     for name, dataset in found.items():
         for axis, size in zip(axes[name], dataset.shape):
             sizes.setdefault(axis, size)
     scales = {axis: netcdf.dimension(h5, axis, _scale_values(axis, size), _store) for axis, size in sizes.items()}
     for axis, scale in scales.items():
-        netcdf.describe(scale, "", DECLARED[axis].doc)
+        netcdf.describe(scale, "", declared[axis].doc if axis in declared else f"the index along axis {axis}")
     done = set()
     for name, dataset in found.items():
         if netcdf.address(dataset) in done:  # a second name of a dataset (theta_i)
             continue
         done.add(netcdf.address(dataset))
         netcdf.attach(dataset, [scales[axis] for axis in axes[name]])
+        declaration = _declaration(name, declared)
         at_root = "/" not in name and name not in COORDINATE_NAMES
         coordinates = " ".join(c for axis, c in (("incidences", "theta_i phi_i"), ("cells", "theta_o phi_o"))
                                if at_root and axis in axes[name])
-        netcdf.describe(dataset, _declared(name).unit, _declared(name).doc,
+        netcdf.describe(dataset, declaration.unit if declaration else "",
+                        declaration.doc if declaration else "not declared",
                         ancillary_variables=netcdf.ancillary(found, name), coordinates=coordinates,
                         bounds=f"{name}_bounds" if f"{name}_bounds" in found else "")
 
 
-def _declared(name: str) -> table_layout.Dataset:
-    """The declaration of dataset ``name``: its own, or for what a scene counts, ``scene/<count>``."""
-    return DECLARED.get(name) or DECLARED["scene/<count>"]
+def declarations() -> tuple[table_layout.Dataset, ...]:
+    """Every dataset a table may hold, with the estimators registered now (a test registers one)."""
+    return table_layout.CORE + estimators.datasets() + table_layout.COORDINATES
 
 
-def _axes_of(name: str, ndim: int) -> tuple[str, ...]:
-    """The axes of dataset ``name`` as declared; for a scene count of more axes than declared,
-    the realizations and then axes of its own (``<leaf>_1``, ...)."""
-    axes = _declared(name).axes
-    if len(axes) == ndim:
-        return axes
+def _declaration(name: str, declared: dict) -> table_layout.Dataset | None:
+    """The declaration of dataset ``name``: its own, for what a scene counts ``scene/<count>``,
+    else None."""
+    if name in declared:
+        return declared[name]
+    return declared["scene/<count>"] if name.startswith("scene/") else None
+
+
+def _axes_of(name: str, ndim: int, declared: dict) -> tuple[str, ...]:
+    """The axes of dataset ``name`` as declared; a scene's count of more axes than declared, the
+    realizations then axes of its own (``<leaf>_1``, ...); an undeclared dataset, axes of its own."""
+    declaration = _declaration(name, declared)
+    if declaration is not None and len(declaration.axes) == ndim:
+        return declaration.axes
     leaf = name.rsplit("/", 1)[-1]
-    return ("realizations", *(f"{leaf}_{k}" for k in range(1, ndim)))
+    own = tuple(f"{leaf}_{k}" for k in range(ndim))
+    return ("realizations", *own[1:]) if declaration is not None else own
 
 
 def _scale_values(axis: str, size: int) -> np.ndarray:
@@ -274,13 +288,18 @@ class Table:
         return direction(self.theta_i, self.phi_i)
 
 
+def realizations(table: Table) -> int:
+    """The realizations a table's standard errors come from (2 in a table that does not say)."""
+    return int(table.attrs.get("realizations", 2))
+
+
 class TableError(ValueError):
     """A damaged, incomplete or inconsistent table; the message is one line naming the dataset."""
 
 
 #: every dataset a table may hold (microsim.table_layout): the core ones, each estimator's, then
 #: the root's coordinates and dimension scales
-DATASETS = table_layout.CORE + estimators.datasets() + table_layout.COORDINATES
+DATASETS = declarations()
 #: the declaration of each dataset, by HDF5 path
 DECLARED = {d.name: d for d in DATASETS}
 COORDINATE_NAMES = {d.name for d in table_layout.COORDINATES}

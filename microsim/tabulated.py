@@ -5,8 +5,9 @@ A table holds, for each of its incidences, the cell averages f_C of the BRDF (co
 
 - **Between incidences**: linear in cos(theta_i) between the two incidences whose polar angles
   bracket theta_i, held at the first and last beyond them; in an anisotropic table (incidences
-  at several azimuths phi_i, on a grid), linear in phi_i too, periodically. Each incidence is
-  read at the same relative azimuth phi_o - phi_i and the same theta_o.
+  at several azimuths phi_i, evenly spaced, on a grid), linear in phi_i too, periodically. Each
+  incidence is read at the same theta_o and relative azimuth phi_o - phi_i: a table's cells lie
+  in the scene's frame, so an incidence at azimuth phi_k is read at phi_o - phi_i + phi_k.
 - **Across cells**: the cell averages taken as the values at the cells' centres, linear in
   phi_o between the centres of a ring (periodically), then linear in theta_o between the two
   rings whose centres bracket theta_o (the polar cap's centre is the pole; beyond the last
@@ -25,14 +26,16 @@ weight; one of its cells, by its share of the incidence's albedo f_C P_C; a dire
 cell with density proportional to cos(theta_o). :meth:`TabulatedBRDF.pdf` is that mixture's
 density, per steradian.
 
-The table must cover the incidences (:func:`full_brdf_gaps`): polar angles whose cosines leave
-no gap wider than MAX_COS_GAP from 1 to 0, the ends included.
+To be evaluated, the table must cover the hemisphere (:meth:`TabulatedBRDF.require_full_brdf`):
+polar angles whose cosines leave no gap wider than MAX_COS_GAP from 1 to 0, the ends included.
+A table that does not is still one to compare with cell by cell (:func:`microsim.compare.compare_tables`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from scipy import sparse
@@ -40,7 +43,7 @@ from scipy import sparse
 from .frames import direction
 from .models.base import BRDFModel, Param, register
 from .table_noise import realization_scale
-from .tables import Table, load
+from .tables import Table, load, realizations
 
 #: the widest gap in cos(theta_i) a table's incidences may leave (between two, and from the
 #: first to normal incidence and the last to the horizon) to be taken for a full BRDF
@@ -62,6 +65,10 @@ class IncidenceGrid:
         tilted = theta_i > SAME_ANGLE
         phi = _distinct(np.mod(phi_i[tilted], 2 * np.pi)) if tilted.any() else np.zeros(1)
         self.mu, self.phi = np.cos(theta), phi
+        steps = np.diff(np.concatenate([phi, [phi[0] + 2 * np.pi]]))
+        if phi.size > 1 and not np.allclose(steps, 2 * np.pi / phi.size, rtol=0, atol=1e-6):
+            raise ValueError(f"incidences: azimuths {np.round(np.degrees(phi), 6).tolist()} deg are not evenly spaced; "
+                             "a full BRDF's are 360 j / M (illumination.azimuths)")
         self.index = np.full((theta.size, phi.size), -1)
         for n, (t, p) in enumerate(zip(theta_i, np.mod(phi_i, 2 * np.pi))):
             k = int(np.argmin(np.abs(theta - t)))
@@ -145,6 +152,18 @@ class CellInterpolant:
         return np.stack(cells, 1), np.stack(weights, 1)
 
 
+class CellNoise(NamedTuple):
+    """A tabulated BRDF averaged over another sensor's cells, one incidence
+    (:meth:`TabulatedBRDF.cell_average_noise`), and its table's errors propagated to them."""
+
+    averages: np.ndarray  #: (cells,)
+    variance: np.ndarray  #: (cells,) of each average
+    common: np.ndarray  #: (cells,) the part of it from the realizations' common scale
+    covariance: object  #: sparse (cells, cells): the covariance of the averages' other part
+    albedo_variance: float  #: of sum(averages * projected)
+    albedo_common: float  #: the albedo's deviation for one standard deviation of the common scale
+
+
 @dataclass(frozen=True)
 class CellValues:
     """Cell averages made otherwise than by a run (a model's, for measuring the interpolation
@@ -186,12 +205,12 @@ class TabulatedBRDF(BRDFModel):
         table = self.table
         self.sensor = table.sensor
         self.grid = IncidenceGrid(table.theta_i, table.phi_i)
-        gap, start = self.grid.gaps()
-        if gap > MAX_COS_GAP:
-            raise ValueError(f"path = {self.path!r}: not a full BRDF: its incidences leave a gap of {gap:.3g} in "
-                             f"cos theta_i from {start:.3g} (at most {MAX_COS_GAP:g}); trace it with "
-                             "illumination.incidences")
+        #: the azimuth of each table incidence: its cells lie in the scene's frame, so the cell of
+        #: a relative azimuth phi_o - phi_i is found at phi_o - phi_i + azimuth
+        self.azimuth = np.asarray(table.phi_i, float)
+        self.one_azimuth = bool(np.all(self.azimuth == self.azimuth[0]))
         self.cells = CellInterpolant(self.sensor)
+        self._noise_of_values = None
         self.f = np.maximum(table.brdf, 0.0)
         shares = self.f * self.sensor.projected_solid_angle()
         self.albedo = shares.sum(axis=1)
@@ -202,7 +221,17 @@ class TabulatedBRDF(BRDFModel):
         self.cos2_lo, self.cos2_hi = np.cos(bounds[0]) ** 2, np.cos(bounds[1]) ** 2
         self.phi_lo, self.phi_hi = bounds[2], bounds[3]
 
+    def require_full_brdf(self) -> None:
+        """ValueError (one line) unless the table's incidences cover the hemisphere (MAX_COS_GAP):
+        what every evaluation needs (a table may be compared cell by cell without it)."""
+        gap, start = self.grid.gaps()
+        if gap > MAX_COS_GAP:
+            raise ValueError(f"path = {self.path!r}: not a full BRDF: its incidences leave a gap of {gap:.3g} in "
+                             f"cos theta_i from {start:.3g} (at most {MAX_COS_GAP:g}); trace it with "
+                             "illumination.incidences")
+
     def _eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        self.require_full_brdf()
         out = np.empty(len(wi))
         for start in range(0, len(wi), CHUNK):  # 32 coefficients a pair: bounded memory
             entry, weight = self.coefficients(wi[start:start + CHUNK], wo[start:start + CHUNK])
@@ -217,45 +246,65 @@ class TabulatedBRDF(BRDFModel):
         return (np.concatenate([forward[0], backward[0]], axis=1),
                 0.5 * np.concatenate([forward[1], backward[1]], axis=1))
 
+    def interpolated(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        """F(wi, wo), the interpolant before it is made reciprocal (module doc): at a table
+        incidence and a cell's centre, that cell's value. Directions above the horizon, (n, 3)."""
+        self.require_full_brdf()
+        entry, weight = self._linear_form(np.asarray(wi, float).reshape(-1, 3), np.asarray(wo, float).reshape(-1, 3))
+        return np.sum(weight * self.f.reshape(-1)[entry], axis=1)
+
     def _linear_form(self, wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The interpolant F(wi, wo) before it is made reciprocal (module doc), as (entry,
         weight), each (n, 16): 4 incidences x 4 cells."""
         mu_i, phi_i = _polar(wi)
         mu_o, phi_o = _polar(wo)
         incidence, weight = self.grid.weights(mu_i, phi_i)
-        cell, cell_weight = self.cells.corners(np.arccos(mu_o), phi_o - phi_i)
-        entry = incidence[:, :, None] * self.sensor.n_cells + cell[:, None, :]
-        return entry.reshape(-1, 16), (weight[:, :, None] * cell_weight[:, None, :]).reshape(-1, 16)
+        theta_o, relative = np.arccos(mu_o), phi_o - phi_i
+        if self.one_azimuth:
+            cell, cell_weight = (np.repeat(a[:, None, :], 4, axis=1)
+                                 for a in self.cells.corners(theta_o, relative + self.azimuth[0]))
+        else:  # each incidence's cells in its own frame
+            cell, cell_weight = (np.stack(a, axis=1) for a in zip(
+                *(self.cells.corners(theta_o, relative + self.azimuth[incidence[:, j]]) for j in range(4))))
+        entry = incidence[:, :, None] * self.sensor.n_cells + cell
+        return entry.reshape(-1, 16), (weight[:, :, None] * cell_weight).reshape(-1, 16)
 
-    def cell_average_noise(self, rule, projected) -> tuple[np.ndarray, ...]:
+    def cell_average_noise(self, rule, projected) -> CellNoise:
         """The averages of f over the cells of a fixed quadrature ``rule``
-        (:class:`microsim.compare.CellRule`, one incidence), and what the table's errors make of
-        them: (averages, their variance, its part common to every cell, the variance of the
-        albedo sum(averages * ``projected``), the standard deviation of its common part). The table's cells are taken as independent but
-        for the common scale of its realizations (:func:`microsim.table_noise.realization_scale`,
-        every incidence's the same realizations'); a table of cell values has no errors."""
-        entry, weight = self.coefficients(rule.wi, rule.nodes)
-        rows = np.repeat(rule.cells, entry.shape[1])
-        form = sparse.csr_matrix(((weight * rule.weights[:, None]).reshape(-1), (rows, entry.reshape(-1))),
-                                 shape=(rule.n_cells, self.f.size))
-        averages = form @ self.f.reshape(-1)
+        (:class:`microsim.compare.CellRule`, one incidence) and what the table's errors make of
+        them (:class:`CellNoise`; the albedo: sum(averages * ``projected``)). The table's values are
+        taken as independent but for the common scale of its realizations
+        (:func:`microsim.table_noise.realization_scale`, every incidence's the same
+        realizations'); a table of cell values has no errors."""
+        self.require_full_brdf()
+        form = sparse.csr_matrix((rule.n_cells, self.f.size))
+        for start in range(0, len(rule.nodes), CHUNK):  # bounded memory, as _eval
+            part = slice(start, start + CHUNK)
+            entry, weight = self.coefficients(rule.wi[part], rule.nodes[part])
+            rows = np.repeat(rule.cells[part], entry.shape[1])
+            form = form + sparse.csr_matrix(((weight * rule.weights[part, None]).reshape(-1),
+                                             (rows, entry.reshape(-1))), shape=form.shape)
         own, scale = self._noise()
-        albedo_form = form.T @ projected
+        shared = form.multiply(np.sqrt(own)[None, :]).tocsr()
+        covariance = shared @ shared.T
         common = (form @ (scale * self.f.reshape(-1))) ** 2
-        variance = form.multiply(form) @ own + common
+        albedo_form = form.T @ projected
         albedo_common = float(albedo_form @ (scale * self.f.reshape(-1)))
-        return averages, variance, common, float(albedo_form**2 @ own) + albedo_common**2, albedo_common
+        return CellNoise(form @ self.f.reshape(-1), covariance.diagonal() + common, common, covariance,
+                         float(albedo_form**2 @ own) + albedo_common**2, albedo_common)
 
     def _noise(self) -> tuple[np.ndarray, np.ndarray]:
         """(each table value's own variance, the square root of its realizations' common relative
         variance), flat as the entries of :meth:`coefficients`."""
-        if not isinstance(self.table, Table):
-            return np.zeros(self.f.size), np.zeros(self.f.size)
-        t, p = self.table, self.sensor.projected_solid_angle()
-        g = realization_scale(t.brdf, t.brdf_stderr, t.albedo, t.albedo_stderr, p, t.paths,
-                              int(t.attrs.get("realizations", 2)))
-        own = np.maximum(t.brdf_stderr**2 - g[:, None] * t.brdf**2, 0.0)
-        return own.reshape(-1), np.repeat(np.sqrt(g), self.sensor.n_cells)
+        if self._noise_of_values is None:
+            if not isinstance(self.table, Table):
+                self._noise_of_values = np.zeros(self.f.size), np.zeros(self.f.size)
+            else:
+                t, p = self.table, self.sensor.projected_solid_angle()
+                g = realization_scale(t.brdf, t.brdf_stderr, t.albedo, t.albedo_stderr, p, t.paths, realizations(t))
+                own = np.maximum(t.brdf_stderr**2 - g[:, None] * t.brdf**2, 0.0)
+                self._noise_of_values = own.reshape(-1), np.repeat(np.sqrt(g), self.sensor.n_cells)
+        return self._noise_of_values
 
     def pdf(self, wi, wo) -> np.ndarray:
         """The density of :meth:`sample`'s directions wo, per steradian, (n,); 0 below the horizon."""
@@ -265,19 +314,27 @@ class TabulatedBRDF(BRDFModel):
         above = (wi[:, 2] > 0) & (wo[:, 2] > 0)
         if not above.any():
             return out
+        self.require_full_brdf()
         wi, wo = wi[above], wo[above]
         mu_i, phi_i = _polar(wi)
         incidence, weight = self.grid.weights(mu_i, phi_i)
-        relative = _turned(wo, -phi_i)
-        cell = self.sensor.lookup(relative)
-        projected = self.sensor.projected_solid_angle()[cell]
-        out[above] = np.sum(weight * self.share[incidence, cell[:, None]], axis=1) * relative[:, 2] / projected
+        projected = self.sensor.projected_solid_angle()
+        if self.one_azimuth:
+            cell = self.sensor.lookup(_turned(wo, self.azimuth[0] - phi_i))
+            density = np.sum(weight * self.share[incidence, cell[:, None]], axis=1) / projected[cell]
+        else:  # the cell of wo in each incidence's own frame
+            density = np.zeros(len(wi))
+            for j in range(4):
+                cell = self.sensor.lookup(_turned(wo, self.azimuth[incidence[:, j]] - phi_i))
+                density += weight[:, j] * self.share[incidence[:, j], cell] / projected[cell]
+        out[above] = density * wo[:, 2]
         return out
 
     def sample(self, wi, sample1, sample2) -> tuple[np.ndarray, np.ndarray]:
         """Directions wo (n, 3) drawn for incidences ``wi`` (n, 3) from uniform numbers
         ``sample1`` (n,) and ``sample2`` (n, 2), and their pdf (module doc). An incidence whose
         table incidences reflect nothing gets wo = (0, 0, 0) and pdf 0."""
+        self.require_full_brdf()
         wi = np.asarray(wi, float).reshape(-1, 3)
         sample1, sample2 = np.asarray(sample1, float).reshape(-1), np.asarray(sample2, float).reshape(-1, 2)
         mu_i, phi_i = _polar(wi)
@@ -290,7 +347,7 @@ class TabulatedBRDF(BRDFModel):
         u = np.clip((sample1 - before) / np.where(w > 0, w, 1.0), 0.0, np.nextafter(1.0, 0.0))
         cell = self._cells(chosen, u)
         cos2 = self.cos2_hi[cell] + sample2[:, 0] * (self.cos2_lo[cell] - self.cos2_hi[cell])
-        phi = self.phi_lo[cell] + sample2[:, 1] * (self.phi_hi[cell] - self.phi_lo[cell]) + phi_i
+        phi = self.phi_lo[cell] + sample2[:, 1] * (self.phi_hi[cell] - self.phi_lo[cell]) - self.azimuth[chosen] + phi_i
         wo = direction(np.arccos(np.sqrt(np.clip(cos2, 0.0, 1.0))), phi).reshape(-1, 3)
         pdf = self.pdf(wi, wo)
         dark = (self.albedo[chosen] <= 0) | (wi[:, 2] <= 0)

@@ -80,17 +80,44 @@ def test_a_held_out_incidence_is_predicted_within_both_tables_errors(full, tmp_p
     assert overall["albedo_z2"] <= overall["albedo_z2_bound"], overall
 
 
+#: the interpolation's largest albedo error at the traced incidences, 13 of them at 400 to 3240
+#: cells (benchmarks/tabulated_accuracy.py, docs/guide/tabulated.md: 0.58 % to 1.34 %, at grazing)
+INTERPOLATION_ALBEDO = 0.014
+
+
 def test_its_albedo_at_every_incidence_is_the_tables_within_errors(full):
     """The tabulated BRDF averaged over the table's own cells at its own incidences: the albedos
-    differ by what the interpolation and the reciprocal average move, within the table's errors."""
+    differ by what the interpolation and the reciprocal average move (a bias, measured without
+    noise), within three of the table's standard errors plus that bias."""
     result = compare.compare_tabulated(full, TabulatedBRDF(full))
-    z = (result.albedo_model - full.albedo) / full.albedo_stderr
-    assert np.all(np.abs(z) < 3.0), z
+    gap = np.abs(result.albedo_model - full.albedo)
+    assert np.all(gap <= 3.0 * full.albedo_stderr + INTERPOLATION_ALBEDO * full.albedo), gap / full.albedo_stderr
 
 
 def test_a_table_against_itself_gives_chi_square_zero(full):
-    overall = compare.compare(full, TabulatedBRDF(full)).metrics()
+    result = compare.compare(full, TabulatedBRDF(full))
+    overall = result.metrics()
     assert overall["chi2_per_cell"] == 0.0 and overall["albedo_z2"] == 0.0
+    assert result.model_errors.startswith("both tables', cell by cell")
+
+
+def test_two_tables_of_a_few_incidences_compare_cell_by_cell(tmp_path):
+    """Not full BRDFs (4 incidences), but the same cells and incidences: cell by cell, within the
+    bounds of both tables' errors; reading either as a BRDF is refused."""
+    few = {"theta_i_deg": [0.0, 30.0, 60.0, 85.0]}
+    a, b = (traced(tmp_path, f"few{seed}", few, 20_000, seed=seed) for seed in (1, 2))
+    overall = compare.compare(a, TabulatedBRDF(b)).metrics()
+    low, high = overall["chi2_bounds"]
+    assert low <= overall["chi2_per_cell"] <= high, overall
+    with pytest.raises(ValueError, match="not a full BRDF"):
+        TabulatedBRDF(b)(a.wi, a.wi)
+
+
+@pytest.mark.parametrize("flag", ["--points", "--retro"])
+def test_points_and_rings_against_a_tabulated_brdf_are_refused(full, capsys, flag):
+    assert main(["compare", str(full.path), "--model", "table", "--param", f"path={full.path}", flag]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and flag in err[0] and "--model table" in err[0], err
 
 
 @pytest.mark.slow
@@ -107,26 +134,50 @@ def test_two_seeds_agree_cell_by_cell_with_both_errors(full, tmp_path):
     # averaged over the same cells, differ by what they say
     first, second = TabulatedBRDF(full), TabulatedBRDF(other)
     p = full.projected_solid_angle
-    chi2, commons, kurtoses = [], [], []
+    chi2, commons, kurtoses, correlated = [], [], [], 0.0
     for wi in full.wi[::3]:
         rule = compare.CellRule(full.sensor, wi, np.full(full.sensor.n_cells, 8))
-        (a, va, ca, _, _), (b, vb, cb, _, _) = first.cell_average_noise(rule, p), second.cell_average_noise(rule, p)
-        lit = (a > 0) & (b > 0)
-        chi2.append((a[lit] - b[lit]) ** 2 / (va[lit] + vb[lit]))
-        commons.append((ca[lit] + cb[lit]) / (va[lit] + vb[lit]))
+        one, two = first.cell_average_noise(rule, p), second.cell_average_noise(rule, p)
+        lit = (one.averages > 0) & (two.averages > 0)
+        variance = one.variance + two.variance
+        chi2.append((one.averages[lit] - two.averages[lit]) ** 2 / variance[lit])
+        commons.append((one.common[lit] + two.common[lit]) / variance[lit])
         kurtoses.append(np.zeros(lit.sum()))
-    low, high = table_noise.chi2_bounds(np.concatenate(kurtoses), np.concatenate(commons))
+        correlated += table_noise.correlated_pairs(one.covariance + two.covariance, variance, lit)
+    low, high = table_noise.chi2_bounds(np.concatenate(kurtoses), np.concatenate(commons), correlated)
     assert low <= np.mean(np.concatenate(chi2)) <= high, (np.mean(np.concatenate(chi2)), low, high)
 
 
-def test_sampling_follows_its_pdf(full):
+@pytest.fixture(scope="module")
+def grid(tmp_path_factory):
+    """Boolean spheres at 13 polar angles x 3 azimuths (0, 120, 240 deg): a table whose cells lie
+    in the scene's frame of incidences at several azimuths."""
+    return traced(tmp_path_factory.mktemp("grid"), "grid", {"incidences": 13, "azimuths": 3}, 8000, seed=1)
+
+
+def test_at_a_traced_incidence_and_a_cells_centre_the_interpolant_is_that_cells_value(full, grid):
+    """Before it is made reciprocal: the weights collapse onto the incidence and the cell, whatever
+    the incidence's azimuth (the cells lie in the scene's frame: an incidence at phi_i = 120 deg
+    has its backscatter cells at phi = 120 deg)."""
+    for table in (full, grid):
+        tabulated = TabulatedBRDF(table)
+        centres = table.sensor.directions()
+        for k in range(len(table.theta_i)):
+            wi = np.broadcast_to(table.wi[k], centres.shape)
+            np.testing.assert_allclose(tabulated.interpolated(wi, centres), table.brdf[k], rtol=1e-9,
+                                       atol=1e-12 * table.brdf.max(),
+                                       err_msg=f"incidence {k}")
+
+
+@pytest.mark.parametrize("which, phi_i", [("full", 0.7), ("grid", 0.7), ("grid", 4.0)])
+def test_sampling_follows_its_pdf(full, grid, which, phi_i):
     """Directions sampled for an incidence between the table's, at an azimuth of its own, binned
     in a grid of (cos^2 theta_o, phi_o) cells that cut across the sensor's: chi-square within its
     two-sided 99 % bounds against the pdf's exact integral over each bin (the pdf is cos theta_o
     times a constant in each sensor cell, turned by phi_i: each bin's share is the sum over the
     sensor cells of their overlaps, in projected solid angle)."""
-    tabulated = TabulatedBRDF(full)
-    theta_i, phi_i, n = np.radians(37.0), 0.7, 200_000
+    tabulated = TabulatedBRDF({"full": full, "grid": grid}[which])
+    theta_i, n = np.radians(37.0), 200_000
     rng = np.random.default_rng(5)
     wi = np.tile(direction(theta_i, phi_i), (n, 1))
     wo, pdf = tabulated.sample(wi, rng.random(n), rng.random((n, 2)))
@@ -147,19 +198,21 @@ def bin_probabilities(tabulated, wi, rows, columns):
     """The pdf's integral over each (cos^2 theta, phi) bin, exactly: sum over the sensor cells of
     the incidences' shares times each cell's overlap with the bin over its own extent (both are
     rectangles in cos^2 theta and phi, and the pdf is uniform in them within a cell)."""
-    incidence, weight = tabulated.grid.weights(np.array([wi[0, 2]]), np.array([np.arctan2(wi[0, 1], wi[0, 0])]))
-    share = weight[0] @ tabulated.share[incidence[0]]
     phi_i = np.arctan2(wi[0, 1], wi[0, 0])
+    incidence, weight = tabulated.grid.weights(np.array([wi[0, 2]]), np.array([phi_i]))
     lo2, hi2 = tabulated.cos2_hi, tabulated.cos2_lo  # cos^2 runs opposite to theta
-    p_lo, p_hi = tabulated.phi_lo + phi_i, tabulated.phi_hi + phi_i
     c_edges, p_edges = np.linspace(0, 1, rows + 1), np.linspace(0, 2 * np.pi, columns + 1)
     out = np.zeros((rows, columns))
-    for r in range(rows):
-        dc = np.clip(np.minimum(hi2, c_edges[r + 1]) - np.maximum(lo2, c_edges[r]), 0, None) / (hi2 - lo2)
-        for c in range(columns):
-            dp = sum(np.clip(np.minimum(p_hi + k, p_edges[c + 1]) - np.maximum(p_lo + k, p_edges[c]), 0, None)
-                     for k in (-2 * np.pi, 0.0, 2 * np.pi, 4 * np.pi)) / (p_hi - p_lo)
-            out[r, c] = np.sum(share * dc * dp)
+    for k, w in zip(incidence[0], weight[0]):  # each table incidence's cells, turned from its frame to wi's
+        share = w * tabulated.share[k]
+        turn = phi_i - tabulated.azimuth[k]
+        p_lo, p_hi = tabulated.phi_lo + turn, tabulated.phi_hi + turn
+        for r in range(rows):
+            dc = np.clip(np.minimum(hi2, c_edges[r + 1]) - np.maximum(lo2, c_edges[r]), 0, None) / (hi2 - lo2)
+            for c in range(columns):
+                dp = sum(np.clip(np.minimum(p_hi + m, p_edges[c + 1]) - np.maximum(p_lo + m, p_edges[c]), 0, None)
+                         for m in (-4 * np.pi, -2 * np.pi, 0.0, 2 * np.pi, 4 * np.pi)) / (p_hi - p_lo)
+                out[r, c] += np.sum(share * dc * dp)
     return out
 
 
