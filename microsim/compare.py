@@ -83,9 +83,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import table_noise
-from .tables import realizations
 from .table_noise import (CHI2_OUTSIDE, chi2_1dof_p, chi2_bounds, hotelling, normal_squares, predicted_variance,
-                          realization_scale)
+                          realization_scale, realizations)
 
 QUADRATURE_TOLERANCE = 0.05
 ALBEDO_TOLERANCE = 1e-4

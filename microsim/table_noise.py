@@ -114,6 +114,11 @@ def predicted_variance(model_values, sim, stderr, signal, projected, scale, at=N
     return variance, kurtosis, np.divide(common, variance, out=np.zeros_like(variance), where=variance > 0)
 
 
+def realizations(table) -> int:
+    """The realizations a table's standard errors come from (2 in a table that does not say)."""
+    return int(table.attrs.get("realizations", 2))
+
+
 def independent_sum(*parts) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(variance, excess kurtosis of the paths' part, realizations' share) of the difference of
     independent estimates, each given as :func:`predicted_variance` gives it (two tables, or a

@@ -288,11 +288,6 @@ class Table:
         return direction(self.theta_i, self.phi_i)
 
 
-def realizations(table: Table) -> int:
-    """The realizations a table's standard errors come from (2 in a table that does not say)."""
-    return int(table.attrs.get("realizations", 2))
-
-
 class TableError(ValueError):
     """A damaged, incomplete or inconsistent table; the message is one line naming the dataset."""
 

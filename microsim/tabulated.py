@@ -42,8 +42,8 @@ from scipy import sparse
 
 from .frames import direction
 from .models.base import BRDFModel, Param, register
-from .table_noise import realization_scale
-from .tables import Table, load, realizations
+from .table_noise import realization_scale, realizations
+from .tables import Table, load
 
 #: the widest gap in cos(theta_i) a table's incidences may leave (between two, and from the
 #: first to normal incidence and the last to the horizon) to be taken for a full BRDF

@@ -288,8 +288,10 @@ def test_a_list_of_the_wrong_length_names_the_limit_and_quotes_an_excerpt(count,
 
 
 @pytest.mark.parametrize("argv", [["--help"], ["run", "--help"], ["compare", "--help"], ["run"], ["fit", "x.h5"],
-                                  ["run", "c.toml", "--workers", "0"]],
-                         ids=["--help", "run --help", "compare --help", "no config", "no --model", "--workers 0"])
+                                  ["run", "c.toml", "--workers", "0"], ["export", "--help"], ["render", "--help"],
+                                  ["export", "x.h5", "--format", "obj"]],
+                         ids=["--help", "run --help", "compare --help", "no config", "no --model", "--workers 0",
+                              "export --help", "render --help", "export --format obj"])
 def test_help_and_argument_errors_load_none_of_the_work(argv):
     """Issue 24, defect 14: every command paid 3.5-4.3 s of start-up, --help included, because
     importing the command line loaded numba; help and usage errors need none of the work's
