@@ -7,7 +7,8 @@ A table holds, for each of its incidences, the cell averages f_C of the BRDF (co
   bracket theta_i, held at the first and last beyond them; in an anisotropic table (incidences
   at several azimuths phi_i, evenly spaced, on a grid), linear in phi_i too, periodically. Each
   incidence is read at the same theta_o and relative azimuth phi_o - phi_i: a table's cells lie
-  in the scene's frame, so an incidence at azimuth phi_k is read at phi_o - phi_i + phi_k.
+  in the scene's frame, so an incidence at azimuth phi_k is read at phi_o - phi_i + phi_k. The
+  normal incidence is read at phi_o itself, as traced, so that f is continuous at the pole.
 - **Across cells**: the cell averages taken as the values at the cells' centres, linear in
   phi_o between the centres of a ring (periodically), then linear in theta_o between the two
   rings whose centres bracket theta_o (the polar cap's centre is the pole; beyond the last
@@ -76,6 +77,8 @@ class IncidenceGrid:
             for j in columns:
                 if self.index[k, j] < 0:
                     self.index[k, j] = n
+        #: the table's normal incidence (theta_i = 0), a node of every azimuth, or None
+        self.normal = int(self.index[0, 0]) if theta[0] <= SAME_ANGLE else None
         if np.any(self.index < 0):
             k, j = np.argwhere(self.index < 0)[0]
             raise ValueError(f"incidences: theta_i {np.degrees(theta[k]):g} deg has no incidence at phi_i "
@@ -85,9 +88,12 @@ class IncidenceGrid:
     def anisotropic(self) -> bool:
         return self.phi.size > 1
 
-    def weights(self, mu: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(incidence, weight), each (n, 4): the table incidences that weigh on each direction of
-        cosine ``mu`` and azimuth ``phi`` and their weights (summing to 1)."""
+    def weights(self, mu: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(incidence, weight, azimuth), each (n, 4): the table incidences that weigh on each
+        direction of cosine ``mu`` and azimuth ``phi``, their weights (summing to 1), and the
+        azimuth each is read as lying at: its column's, so that it is read at the same relative
+        azimuth; the normal incidence, ``phi`` itself, so that it is read in the scene's frame,
+        as it was traced (the same from whatever azimuth wi nears the normal)."""
         m = self.mu[::-1]  # increasing
         upper = np.clip(np.searchsorted(m, mu), 1, max(m.size - 1, 1)) if m.size > 1 else np.zeros(mu.size, int)
         lower = np.maximum(upper - 1, 0)
@@ -105,7 +111,10 @@ class IncidenceGrid:
             j1, s = (j0 + 1) % n, u - np.floor(u)
         incidence = np.stack([self.index[k0, j0], self.index[k0, j1], self.index[k1, j0], self.index[k1, j1]], 1)
         weight = np.stack([(1 - t) * (1 - s), (1 - t) * s, t * (1 - s), t * s], 1)
-        return incidence, weight
+        azimuth = self.phi[np.stack([j0, j1, j0, j1], 1)]
+        if self.normal is not None:
+            azimuth = np.where(incidence == self.normal, phi[:, None], azimuth)
+        return incidence, weight, azimuth
 
     def gaps(self) -> tuple[float, float]:
         """(the widest gap in cos(theta_i), the cosine it starts from), the ends 1 and 0 included."""
@@ -205,10 +214,6 @@ class TabulatedBRDF(BRDFModel):
         table = self.table
         self.sensor = table.sensor
         self.grid = IncidenceGrid(table.theta_i, table.phi_i)
-        #: the azimuth of each table incidence: its cells lie in the scene's frame, so the cell of
-        #: a relative azimuth phi_o - phi_i is found at phi_o - phi_i + azimuth
-        self.azimuth = np.asarray(table.phi_i, float)
-        self.one_azimuth = bool(np.all(self.azimuth == self.azimuth[0]))
         self.cells = CellInterpolant(self.sensor)
         self._noise_of_values = None
         self.f = np.maximum(table.brdf, 0.0)
@@ -258,14 +263,10 @@ class TabulatedBRDF(BRDFModel):
         weight), each (n, 16): 4 incidences x 4 cells."""
         mu_i, phi_i = _polar(wi)
         mu_o, phi_o = _polar(wo)
-        incidence, weight = self.grid.weights(mu_i, phi_i)
+        incidence, weight, azimuth = self.grid.weights(mu_i, phi_i)
         theta_o, relative = np.arccos(mu_o), phi_o - phi_i
-        if self.one_azimuth:
-            cell, cell_weight = (np.repeat(a[:, None, :], 4, axis=1)
-                                 for a in self.cells.corners(theta_o, relative + self.azimuth[0]))
-        else:  # each incidence's cells in its own frame
-            cell, cell_weight = (np.stack(a, axis=1) for a in zip(
-                *(self.cells.corners(theta_o, relative + self.azimuth[incidence[:, j]]) for j in range(4))))
+        cell, cell_weight = (np.stack(a, axis=1) for a in zip(  # each incidence's cells in its own frame
+            *(self.cells.corners(theta_o, relative + azimuth[:, j]) for j in range(4))))
         entry = incidence[:, :, None] * self.sensor.n_cells + cell
         return entry.reshape(-1, 16), (weight[:, :, None] * cell_weight).reshape(-1, 16)
 
@@ -317,16 +318,12 @@ class TabulatedBRDF(BRDFModel):
         self.require_full_brdf()
         wi, wo = wi[above], wo[above]
         mu_i, phi_i = _polar(wi)
-        incidence, weight = self.grid.weights(mu_i, phi_i)
+        incidence, weight, azimuth = self.grid.weights(mu_i, phi_i)
         projected = self.sensor.projected_solid_angle()
-        if self.one_azimuth:
-            cell = self.sensor.lookup(_turned(wo, self.azimuth[0] - phi_i))
-            density = np.sum(weight * self.share[incidence, cell[:, None]], axis=1) / projected[cell]
-        else:  # the cell of wo in each incidence's own frame
-            density = np.zeros(len(wi))
-            for j in range(4):
-                cell = self.sensor.lookup(_turned(wo, self.azimuth[incidence[:, j]] - phi_i))
-                density += weight[:, j] * self.share[incidence[:, j], cell] / projected[cell]
+        density = np.zeros(len(wi))
+        for j in range(4):  # the cell of wo in each incidence's own frame
+            cell = self.sensor.lookup(_turned(wo, azimuth[:, j] - phi_i))
+            density += weight[:, j] * self.share[incidence[:, j], cell] / projected[cell]
         out[above] = density * wo[:, 2]
         return out
 
@@ -338,16 +335,17 @@ class TabulatedBRDF(BRDFModel):
         wi = np.asarray(wi, float).reshape(-1, 3)
         sample1, sample2 = np.asarray(sample1, float).reshape(-1), np.asarray(sample2, float).reshape(-1, 2)
         mu_i, phi_i = _polar(wi)
-        incidence, weight = self.grid.weights(mu_i, phi_i)
+        incidence, weight, azimuth = self.grid.weights(mu_i, phi_i)
         edges = np.cumsum(weight, axis=1)
         pick = np.minimum(np.sum(sample1[:, None] >= edges, axis=1), 3)
         chosen = incidence[np.arange(len(wi)), pick]
+        turn = phi_i - azimuth[np.arange(len(wi)), pick]
         w = weight[np.arange(len(wi)), pick]
         before = edges[np.arange(len(wi)), pick] - w
         u = np.clip((sample1 - before) / np.where(w > 0, w, 1.0), 0.0, np.nextafter(1.0, 0.0))
         cell = self._cells(chosen, u)
         cos2 = self.cos2_hi[cell] + sample2[:, 0] * (self.cos2_lo[cell] - self.cos2_hi[cell])
-        phi = self.phi_lo[cell] + sample2[:, 1] * (self.phi_hi[cell] - self.phi_lo[cell]) - self.azimuth[chosen] + phi_i
+        phi = self.phi_lo[cell] + sample2[:, 1] * (self.phi_hi[cell] - self.phi_lo[cell]) + turn
         wo = direction(np.arccos(np.sqrt(np.clip(cos2, 0.0, 1.0))), phi).reshape(-1, 3)
         pdf = self.pdf(wi, wo)
         dark = (self.albedo[chosen] <= 0) | (wi[:, 2] <= 0)

@@ -158,7 +158,7 @@ def grid(tmp_path_factory):
 def test_at_a_traced_incidence_and_a_cells_centre_the_interpolant_is_that_cells_value(full, grid):
     """Before it is made reciprocal: the weights collapse onto the incidence and the cell, whatever
     the incidence's azimuth (the cells lie in the scene's frame: an incidence at phi_i = 120 deg
-    has its backscatter cells at phi = 120 deg)."""
+    has its backscatter cells at phi = 120 deg), and onto the normal incidence near it."""
     for table in (full, grid):
         tabulated = TabulatedBRDF(table)
         centres = table.sensor.directions()
@@ -167,6 +167,12 @@ def test_at_a_traced_incidence_and_a_cells_centre_the_interpolant_is_that_cells_
             np.testing.assert_allclose(tabulated.interpolated(wi, centres), table.brdf[k], rtol=1e-9,
                                        atol=1e-12 * table.brdf.max(),
                                        err_msg=f"incidence {k}")
+        # towards the normal from any azimuth: the normal incidence's cells, in the scene's frame
+        for phi in (0.3, 2.0, 3.5, 5.9):
+            wi = np.broadcast_to(direction(1e-7, phi), centres.shape)
+            normal = int(np.argmin(table.theta_i))
+            np.testing.assert_allclose(tabulated.interpolated(wi, centres), table.brdf[normal], rtol=1e-6,
+                                       atol=1e-9 * table.brdf.max(), err_msg=f"towards the normal at {phi}")
 
 
 @pytest.mark.parametrize("which, phi_i", [("full", 0.7), ("grid", 0.7), ("grid", 4.0)])
@@ -199,13 +205,13 @@ def bin_probabilities(tabulated, wi, rows, columns):
     the incidences' shares times each cell's overlap with the bin over its own extent (both are
     rectangles in cos^2 theta and phi, and the pdf is uniform in them within a cell)."""
     phi_i = np.arctan2(wi[0, 1], wi[0, 0])
-    incidence, weight = tabulated.grid.weights(np.array([wi[0, 2]]), np.array([phi_i]))
+    incidence, weight, azimuth = tabulated.grid.weights(np.array([wi[0, 2]]), np.array([phi_i]))
     lo2, hi2 = tabulated.cos2_hi, tabulated.cos2_lo  # cos^2 runs opposite to theta
     c_edges, p_edges = np.linspace(0, 1, rows + 1), np.linspace(0, 2 * np.pi, columns + 1)
     out = np.zeros((rows, columns))
-    for k, w in zip(incidence[0], weight[0]):  # each table incidence's cells, turned from its frame to wi's
+    for k, w, a in zip(incidence[0], weight[0], azimuth[0]):  # each incidence's cells, turned to wi's frame
         share = w * tabulated.share[k]
-        turn = phi_i - tabulated.azimuth[k]
+        turn = phi_i - a
         p_lo, p_hi = tabulated.phi_lo + turn, tabulated.phi_hi + turn
         for r in range(rows):
             dc = np.clip(np.minimum(hi2, c_edges[r + 1]) - np.maximum(lo2, c_edges[r]), 0, None) / (hi2 - lo2)
@@ -255,7 +261,7 @@ def test_an_anisotropic_table_is_read_on_its_grid_of_polar_angles_and_azimuths(t
     constant = TabulatedBRDF(dataclasses.replace(table, brdf=np.full_like(table.brdf, 0.2)))
     np.testing.assert_allclose(constant(wi, wo), 0.2, rtol=1e-12, atol=0)
     # at a traced incidence the interpolation in phi_i puts all its weight there
-    incidence, weight = tabulated.grid.weights(np.cos(table.theta_i[5:9]), table.phi_i[5:9])
+    incidence, weight, _ = tabulated.grid.weights(np.cos(table.theta_i[5:9]), table.phi_i[5:9])
     np.testing.assert_allclose(np.max(weight, axis=1), 1.0, rtol=0, atol=1e-12)
     assert np.array_equal(incidence[np.arange(4), np.argmax(weight, axis=1)], np.arange(5, 9))
 
