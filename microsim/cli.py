@@ -235,7 +235,8 @@ def export(table_path, fmt, out, force):
 @click.option("--size", type=click.IntRange(16, 4096), default=256, show_default=True, help="pixels a side")
 @click.option("--spp", type=click.IntRange(1, 65536), default=64, show_default=True, help="samples a pixel")
 @click.option("--mesh", type=click.Path(dir_okay=False, path_type=Path),
-              help="render this mesh (.ply, .obj; centred and scaled to the unit sphere) instead of the sphere")
+              help="render this mesh (.ply, .obj; centred, its bounding box's longest side scaled to 2) instead "
+                   "of the unit sphere")
 def render_command(table_path, model_name, params, out, force, size, spp, mesh):
     """Render a full-BRDF table on a sphere under a directional light and a constant environment,
     beside a model and their relative difference (Mitsuba 3: pip install 'microsim[render]')."""
@@ -249,10 +250,8 @@ def render_command(table_path, model_name, params, out, force, size, spp, mesh):
         raise BadInput("--param: give --model, the model they are parameters of")
     if mesh is not None and (not mesh.is_file() or mesh.suffix.lower() not in (".ply", ".obj")):
         raise BadInput(f"--mesh {mesh}: {'not found' if not mesh.is_file() else 'accepted: a .ply or .obj file'}")
-    try:
-        from . import mitsuba, render
-    except ImportError as err:
-        raise BadInput(f"render: {err}") from None
+    from . import mitsuba, render
+
     try:
         mitsuba.load()
     except ImportError as err:
@@ -271,8 +270,11 @@ def render_command(table_path, model_name, params, out, force, size, spp, mesh):
             except ValueError as err:
                 raise BadInput(f"--model {model_name}: {err}") from None
     with _user_model_errors(model_name or ""):
-        images = render.comparison(mitsuba.bsdf(tabulated), None if model is None else mitsuba.bsdf(model),
-                                   size=size, spp=spp, mesh=mesh)
+        try:
+            images = render.comparison(mitsuba.bsdf(tabulated), None if model is None else mitsuba.bsdf(model),
+                                       size=size, spp=spp, mesh=mesh)
+        except ValueError as err:  # a mesh Mitsuba cannot read
+            raise BadInput(str(err)) from None
     render.figure(images, out, (f"table {table_path.name}", repr(model)))
     click.echo(f"render written to {out} (Mitsuba {mitsuba.variant()}, {size} x {size}, {spp} samples a pixel)")
 

@@ -1,7 +1,7 @@
 """A table beside a model, rendered (``microsim render``, the optional extra ``render``).
 
 The four papers show their BRDFs on objects; so does this: a unit sphere (or a user's mesh,
-scaled to fit it) seen from +z, lit once by a directional light (irradiance 1, arriving from
+centred, its bounding box's longest side 2) seen from +z, lit once by a directional light (irradiance 1, arriving from
 LIGHT, 55 degrees from the view) and once by a constant environment (radiance 1), each with the
 table's tabulated BRDF, with the model's, and their relative difference (table - model) / model,
 side by side with colour bars. Mitsuba 3's path tracer renders them (:mod:`microsim.mitsuba`),
@@ -48,14 +48,18 @@ def scene(bsdf, light: str, size: int, spp: int, mesh: Path | None = None):
 
 
 def _object(mi, bsdf, mesh: Path | None) -> dict:
-    """The unit sphere, or ``mesh`` centred and scaled into it."""
+    """The unit sphere, or ``mesh`` centred on it, its bounding box's longest side scaled to 2 (a
+    ball becomes the unit sphere)."""
     if mesh is None:
         return {"type": "sphere", "bsdf": bsdf}
     shape = {"type": MESH_TYPES[mesh.suffix.lower()], "filename": str(mesh)}
-    box = mi.load_dict(shape).bbox()
+    try:
+        box = mi.load_dict(shape).bbox()
+    except RuntimeError as err:
+        raise ValueError(f"--mesh {mesh}: Mitsuba cannot read it ({str(err).strip().splitlines()[-1]})") from None
     centre = (np.array(box.min) + np.array(box.max)) / 2
-    radius = np.linalg.norm(np.array(box.max) - np.array(box.min)) / 2
-    to_world = mi.ScalarTransform4f().scale(1.0 / radius).translate((-centre).tolist())
+    radius = float(np.max(np.array(box.max) - np.array(box.min))) / 2  # a ball's radius
+    to_world = mi.ScalarTransform4f().scale(float(1.0 / radius)).translate([float(x) for x in -centre])
     return {**shape, "to_world": to_world, "bsdf": bsdf, "face_normals": False}
 
 

@@ -139,6 +139,21 @@ def test_render_writes_the_comparison_png(spheres, tmp_path, capsys):
     assert "render written to" in capsys.readouterr().out
 
 
+def test_a_mesh_is_centred_and_scaled_into_the_unit_sphere(spheres, tmp_path):
+    """--mesh: an icosphere of radius 2 at (3, 1, 0) covers what the unit sphere covers (the share
+    of the frame within the faceting's difference)."""
+    import trimesh
+
+    mesh = trimesh.creation.icosphere(subdivisions=4, radius=2.0)
+    mesh.apply_translation([3.0, 1.0, 0.0])
+    mesh.export(tmp_path / "ball.ply")
+    covered = render.coverage(SIZE, SPP, tmp_path / "ball.ply")
+    sphere = render.coverage(SIZE, SPP)
+    assert abs(covered.sum() - sphere.sum()) < 0.01 * sphere.sum()
+    assert main(["render", str(spheres), "--mesh", str(tmp_path / "ball.ply"), "--out", str(tmp_path / "b.png"),
+                 "--size", "32", "--spp", "4"]) == 0
+
+
 def test_the_plugin_takes_a_registered_model_by_name():
     """{"type": "microsim", "model": "lambert", "albedo": 0.5}: f cos theta_o = 0.5 cos / pi."""
     plugin.register()
@@ -153,6 +168,8 @@ def test_bad_renders_are_refused_in_one_line_and_write_nothing(spheres, tmp_path
     taken = tmp_path / "taken.png"
     taken.write_bytes(b"keep me")
     few = traced(tmp_path, "few", {"kind": "plane"}, 0.5, {"theta_i_deg": [0.0, 30.0, 60.0, 85.0]})
+    broken = tmp_path / "broken.ply"
+    broken.write_text("ply\nformat ascii 1.0\nelement vertex 3\nend_header\n1 2\n")
     cases = (
         (["render", str(spheres), "--out", str(taken)], ("--out", "exists", "--force")),
         (["render", str(tmp_path / "missing.h5"), "--out", str(tmp_path / "a.png")], ("missing.h5", "not found")),
@@ -160,6 +177,8 @@ def test_bad_renders_are_refused_in_one_line_and_write_nothing(spheres, tmp_path
         (["render", str(spheres), "--mesh", str(tmp_path / "none.ply"), "--out", str(tmp_path / "a.png")],
          ("--mesh", "not found")),
         (["render", str(few), "--out", str(tmp_path / "a.png")], ("not a full BRDF",)),
+        (["render", str(spheres), "--mesh", str(broken), "--out", str(tmp_path / "a.png")],
+         ("--mesh", "cannot read")),
     )
     before = sorted(tmp_path.iterdir())
     for argv, words in cases:
