@@ -221,8 +221,8 @@ def export(table_path, fmt, out, force):
     table = _load_table(table_path)
     try:
         exporters.export(TabulatedBRDF(table), fmt, out)
-    except ValueError as err:  # not a full BRDF, or anisotropic
-        raise BadInput(f"TABLE.h5: {table_path}: {err}") from None
+    except ValueError as err:  # not a full BRDF, or anisotropic: the message names the table
+        raise BadInput(str(err)) from None
     click.echo(f"{fmt} written to {out}")
 
 
@@ -239,7 +239,7 @@ def export(table_path, fmt, out, force):
                    "of the unit sphere")
 def render_command(table_path, model_name, params, out, force, size, spp, mesh):
     """Render a full-BRDF table on a sphere under a directional light and a constant environment,
-    beside a model and their relative difference (Mitsuba 3: pip install 'microsim[render]')."""
+    beside a model and their relative difference (Mitsuba 3: the extra render, pip install -e '.[render]' in microsim's clone)."""
     from .tabulated import TabulatedBRDF
 
     if out.exists() and not force:
@@ -260,8 +260,8 @@ def render_command(table_path, model_name, params, out, force, size, spp, mesh):
     try:
         tabulated = TabulatedBRDF(table)
         tabulated.require_full_brdf()
-    except ValueError as err:
-        raise BadInput(f"TABLE.h5: {table_path}: {err}") from None
+    except ValueError as err:  # the message names the table
+        raise BadInput(str(err)) from None
     model = None
     if model_name is not None:
         with _user_model_errors(model_name):
@@ -352,6 +352,8 @@ def _report(result, table, title, as_json, plot_dir, json_object) -> None:
                    f"{compare_module.SIGNAL_TO_NOISE:g} standard errors; chi^2 per cell: 1 expected for the model "
                    f"of the table, {100 * (1 - compare_module.CHI2_OUTSIDE):g} % two-sided bounds; consistent: "
                    "within them, and the albedo's z^2 within its bound)")
+        if result.model_errors:
+            click.echo(f"errors (the z, the chi^2 and the +- of albedo sim): {result.model_errors}")
         click.echo(f"{'theta_i':>8} {'phi_i':>6} {'cells':>6} {'med|rel|':>9} {'rel rmse':>9} {'max|z|':>7} "
                    f"{'chi2/cell':>9} {'bounds':>14} {'albedo z^2':>10} {'bound':>6}  {'verdict':<12} "
                    f"{'albedo model':>12} "
@@ -367,6 +369,8 @@ def _report(result, table, title, as_json, plot_dir, json_object) -> None:
                        f"{row['max_abs_z']:7.2f} {row['chi2_per_cell']:9.3f} {f'[{low:.3f}, {high:.3f}]':>14} "
                        f"{row['albedo_z2']:10.3g} {row['albedo_z2_bound']:6.2f}  "
                        f"{VERDICTS[row['consistent']]:<12}{albedos}")
+    if getattr(result, "warning", None) and not as_json:
+        click.echo(f"warning: {result.warning}", err=True)
     if plot_dir is not None and not as_json:
         click.echo(f"{len(written)} figures written to {plot_dir}")
 

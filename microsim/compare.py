@@ -145,6 +145,8 @@ class Comparison:
     #: whose errors ``stderr`` and ``variance`` hold beyond the table's (a tabulated model's:
     #: :func:`compare_tables`, :func:`compare_tabulated`); None for an analytic model, exact
     model_errors: str | None = None
+    #: why the bounds, made for independent estimates, do not hold (:func:`not_independent`); None: they do
+    warning: str | None = None
 
     def metrics(self, i: int | None = None) -> dict:
         """The metrics of one incidence, or over all incidences (``i=None``)."""
@@ -217,6 +219,7 @@ class Comparison:
                          f"them, and the mean albedo z^2 below its {100 * (1 - CHI2_OUTSIDE / 2):g} % point",
             "quadrature_max_change_in_stderr": self.quadrature_change,
             **({"model_errors": self.model_errors} if self.model_errors else {}),
+            **({"warning": self.warning} if self.warning else {}),
         }
 
 
@@ -503,7 +506,8 @@ def compare_tables(table, tabulated, order: str = "all") -> Comparison:
                       0.0, variance, kurtosis, common,
                       albedo_common=np.stack([np.sqrt(scale) * albedo for scale, (_, _, _, albedo, _) in zip(scales, both)],
                                              axis=1),
-                      model_errors=f"both tables', cell by cell ({other.path} has {table.path}'s cells and incidences)")
+                      model_errors=f"both tables', cell by cell ({other.path} has {table.path}'s cells and incidences)",
+                      warning=not_independent(table, other, np.array_equal(sim, values)))
 
 
 def compare_tabulated(table, tabulated, order: str = "all") -> Comparison:
@@ -534,7 +538,23 @@ def compare_tabulated(table, tabulated, order: str = "all") -> Comparison:
                       kurtosis, common, correlated=correlated,
                       albedo_common=np.stack([np.sqrt(scale) * albedo_sim, [n.albedo_common for n in noise]], axis=1),
                       model_errors=f"both: {tabulated.table.path} interpolated to {table.path}'s cells and incidences, "
-                                   "its errors propagated (microsim.tabulated)")
+                                   "its errors propagated (microsim.tabulated)",
+                      warning=not_independent(table, tabulated.table))
+
+
+def not_independent(table, other, same_values: bool = False) -> str | None:
+    """Why two tables' errors are not independent, as compare's bounds assume, or None: the same
+    values (a table against itself), or the same seed (the same realizations of the geometry, and
+    the same random numbers at incidences of the same index)."""
+    if same_values:
+        return (f"{other.path} holds {table.path}'s values: chi^2 and albedo z^2 are 0 by construction, "
+                "and the bounds, made for independent tables, do not apply")
+    seed = table.attrs.get("seed")
+    if seed is not None and seed == other.attrs.get("seed"):
+        return (f"both tables were traced with seed {seed}: they share realizations of the geometry and random "
+                "numbers, so their errors are correlated and the bounds, made for independent tables, do not "
+                "hold; trace one with another --seed")
+    return None
 
 
 def compare_points(table, model, order: str = "all", **params) -> PointComparison:

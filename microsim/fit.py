@@ -141,8 +141,9 @@ def fit(table, model, free: list[str], fixed: dict | None = None, order: str = "
         if name not in params:
             raise ValueError(f"--free {name}: model {model_name!r} has no such parameter; its parameters: "
                              f"{', '.join(params)}")
-        if params[name].choices is not None:
-            raise ValueError(f"--free {name}: a choice ({params[name].describe()}) cannot be fitted; give it with --param")
+        if params[name].choices is not None or params[name].text:
+            raise ValueError(f"--free {name}: takes {params[name].describe()}, not a number, so it cannot be fitted; "
+                             "give it with --param")
     if len(set(free)) != len(free):
         raise ValueError("--free: a parameter is named twice")
     start = np.array([_start(params[name], fixed.get(name)) for name in free])

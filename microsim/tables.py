@@ -313,6 +313,8 @@ def load(path: str | Path) -> Table:
     (a checksum mismatch), incomplete, inconsistently shaped or holds NaN.
     """
     path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
     with h5py.File(path, "r") as h5:
         try:
             arrays = _read_datasets(h5)

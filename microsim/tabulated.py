@@ -231,7 +231,7 @@ class TabulatedBRDF(BRDFModel):
         what every evaluation needs (a table may be compared cell by cell without it)."""
         gap, start = self.grid.gaps()
         if gap > MAX_COS_GAP:
-            raise ValueError(f"path = {self.path!r}: not a full BRDF: its incidences leave a gap of {gap:.3g} in "
+            raise ValueError(f"{self.path}: not a full BRDF: its incidences leave a gap of {gap:.3g} in "
                              f"cos theta_i from {start:.3g} (at most {MAX_COS_GAP:g}); trace it with "
                              "illumination.incidences")
 

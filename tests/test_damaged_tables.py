@@ -187,3 +187,8 @@ def test_a_foreign_hdf5_file_is_not_a_microsim_table(tmp_path, capsys):
     with h5py.File(path, "w") as h5:
         h5["data"] = np.arange(3.0)
     assert compare_error(path, capsys).endswith("not a microsim table (no microsim_version and config_toml attributes)")
+
+
+def test_a_missing_table_is_named_in_one_line(tmp_path):
+    with pytest.raises(FileNotFoundError, match=r"^\S*none\.h5: no such file$"):
+        tables.load(tmp_path / "none.h5")

@@ -115,6 +115,7 @@ def test_reports_a_poor_fit_honestly(medium_table, capsys):
     (["--model", "lambert"], "--free"),
     (["--model", "lambert", "--free", "roughness"], "--free roughness"),
     (["--model", "lambert_sphere", "--free", "method"], "--free method"),
+    (["--model", "table", "--free", "path"], "--free path"),
     (["--model", "lambert", "--free", "albedo", "--free", "albedo"], "--free"),
     (["--model", "velvet", "--free", "albedo"], "--model"),
     (["--model", "oren_nayar", "--free", "albedo", "--param", "roughness=3"], "roughness"),

@@ -99,6 +99,21 @@ def test_a_table_against_itself_gives_chi_square_zero(full):
     overall = result.metrics()
     assert overall["chi2_per_cell"] == 0.0 and overall["albedo_z2"] == 0.0
     assert result.model_errors.startswith("both tables', cell by cell")
+    assert "by construction" in result.warning
+
+
+def test_tables_of_one_seed_are_flagged_as_not_independent(full, tmp_path, capsys):
+    """compare's bounds are for independent tables: two tables of the same seed share their
+    geometry and random numbers, and compare says so (on stderr, and in the JSON); of another
+    seed, not."""
+    held = {"theta_i_deg": [20.0, 50.0]}
+    same, other = (traced(tmp_path, f"seed{seed}", held, 2000, seed=seed) for seed in (1, 2))
+    assert "seed 1" in compare.compare(same, TabulatedBRDF(full)).warning
+    assert compare.compare(other, TabulatedBRDF(full)).warning is None
+    assert main(["compare", str(same.path), "--model", "table", "--param", f"path={full.path}"]) == 0
+    assert capsys.readouterr().err.startswith("warning: both tables were traced with seed 1")
+    assert main(["compare", str(other.path), "--model", "table", "--param", f"path={full.path}", "--json"]) == 0
+    assert "warning" not in capsys.readouterr().out
 
 
 def test_two_tables_of_a_few_incidences_compare_cell_by_cell(tmp_path):
