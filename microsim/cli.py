@@ -239,7 +239,8 @@ def export(table_path, fmt, out, force):
                    "of the unit sphere")
 def render_command(table_path, model_name, params, out, force, size, spp, mesh):
     """Render a full-BRDF table on a sphere under a directional light and a constant environment,
-    beside a model and their relative difference (Mitsuba 3: the extra render, pip install -e '.[render]' in microsim's clone)."""
+    beside a model and their relative difference (Mitsuba 3: the extra render, pip install -e
+    '.[render]' in microsim's clone)."""
     from .tabulated import TabulatedBRDF
 
     if out.exists() and not force:

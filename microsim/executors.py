@@ -191,7 +191,8 @@ def dask(plan, units, emit, workers: int = 1, scheduler: str | None = None) -> N
         from dask import config as dask_config
         from distributed import Client, LocalCluster, as_completed
     except ImportError:
-        raise WorkerFailed("--executor dask needs dask.distributed: install the extra dask: pip install -e '.[dask]' in microsim's clone") from None
+        raise WorkerFailed("--executor dask needs dask.distributed: install the extra dask: "
+                           "pip install -e '.[dask]' in microsim's clone") from None
     from distributed import CancelledError, TimeoutError as DaskTimeout
     from distributed.comm.core import CommClosedError
 

@@ -4,8 +4,9 @@ A table read as a BRDF at any pair of directions (:mod:`microsim.tabulated`) nee
 over the whole hemisphere. N of them are put at the centres of N of the sensor's rings, as evenly
 as whole rings allow, from the polar cap (normal incidence) to the last ring (near grazing): the
 sensor's rings are nearly equal in theta, so the incidences are evenly spaced where N - 1 divides
-the rings less one (their spacings differ by one ring at most otherwise), and each lies where a ring of cells does,
-so that a cell and its reciprocal (wi and wo exchanged) are both read at a table incidence. For
+the rings less one (their spacings differ by one ring at most otherwise), and each lies where a
+ring of cells does, so that a cell and its reciprocal (wi and wo exchanged) are both read at a
+table incidence. For
 an anisotropic scene, ``illumination.azimuths = M`` traces each polar angle but the normal at M
 azimuths 360 j / M.
 """

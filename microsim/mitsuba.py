@@ -32,7 +32,8 @@ def load():
         import drjit as dr
         import mitsuba as mi
     except ImportError:
-        raise ImportError("Mitsuba 3 is not installed: install the extra render: pip install -e '.[render]' in microsim's clone") from None
+        raise ImportError("Mitsuba 3 is not installed: install the extra render: "
+                          "pip install -e '.[render]' in microsim's clone") from None
     if mi.variant() is None:
         mi.set_variant(next(v for v in VARIANTS if v in mi.variants()))
     if dr.is_jit_v(mi.Float):  # a Python BSDF needs concrete arrays: evaluate wavefront by wavefront

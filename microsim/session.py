@@ -481,7 +481,8 @@ def _check_dask(scheduler) -> None:
     try:
         import distributed  # noqa: F401
     except ImportError:
-        raise RunRefused("--executor dask: dask.distributed is not installed (install the extra dask: pip install -e '.[dask]' in microsim's clone)") from None
+        raise RunRefused("--executor dask: dask.distributed is not installed (install the extra dask: "
+                         "pip install -e '.[dask]' in microsim's clone)") from None
     address = SCHEDULER_ADDRESS.match(scheduler) if scheduler is not None else None
     if scheduler is not None and (address is None or not 0 < int(address["port"]) < 65536):
         raise RunRefused(f"--scheduler {scheduler!r}: expected a Dask scheduler address [tcp|tls|ws|wss://]host:port "
