@@ -93,7 +93,8 @@ def source(config) -> tuple[str, Path]:
     key = f"scene.path = {config.scene.path!r}"
     file = Path(config.scene.path)
     if not file.is_file():
-        raise ValueError(f"{key}: no such file")
+        where = "" if file.is_absolute() else f" (relative to the directory microsim runs in, {Path.cwd()})"
+        raise ValueError(f"{key}: no such file{where}")
     return key, file
 
 

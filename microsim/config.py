@@ -57,7 +57,8 @@ class Illumination(Section):
         description="one azimuth for all incidences, or one per theta_i_deg")
     incidences: int | None = Field(
         None, ge=2, le=MAX_INCIDENCES, description="a full BRDF: this many polar angles at the centres of the "
-        "sensor's rings, spread evenly from normal incidence to the last ring, instead of theta_i_deg "
+        "sensor's rings, as evenly as whole rings allow, from normal incidence to the last ring, instead of "
+        "theta_i_deg "
         "(microsim.full_brdf; what `--model table` and `microsim export` need: cos theta_i gaps of 0.25 at most, "
         "about 7 incidences or more)")
     azimuths: int | None = Field(None, ge=1, le=64, description="with incidences: each polar angle but 0 at this "
