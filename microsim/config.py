@@ -279,7 +279,8 @@ class Key:
 def keys() -> list[Key]:
     """Every key of a run's config, read from the schema (the same source as validation); the
     keys of ``[sweep]``: :func:`microsim.sweep.keys`. A key that only some kinds of a section
-    have names them, and its default and meaning are given per kind where the kinds differ."""
+    have names them, and its accepted values, default and meaning are given per kind where the
+    kinds differ."""
     out = [_key("name", Config, "name")]
     for section, model in (("scene", Scene), ("material", AnyMaterial), ("base", AnyMaterial),
                            ("illumination", Illumination), ("sensor", SensorSection), ("run", Run)):
@@ -294,6 +295,7 @@ def keys() -> list[Key]:
             tags = [_kind_of(m) for m in holders] if len(members) > 1 else [""]
             out.append(dataclasses.replace(
                 each[0], kinds="" if len(holders) == len(members) else ", ".join(tags),
+                accepted=_per_kind(tags, [k.accepted for k in each]),
                 default=_per_kind(tags, [k.default for k in each]), doc=_per_kind(tags, [k.doc for k in each])))
     return out
 
