@@ -90,10 +90,35 @@ def _read(config) -> tuple[Tile, str]:
         mesh = trimesh.load(file, force="mesh", process=False)
         data = file.read_bytes()
     except Exception as err:  # trimesh raises what its loaders raise
-        raise ValueError(f"{key}: cannot be read as a mesh ({' '.join(str(err).split())[:200]})") from None
-    vertices = np.asarray(mesh.vertices, np.float64) * scene.scale
-    tile = periodic_tile.checked(key, vertices, mesh.faces, scene.tile_sides, closed_by_base=config.base is not None)
+        raise ValueError(f"{key}: trimesh cannot read it as a {file.suffix.lstrip('.').upper() or 'mesh'} file "
+                         f"(damaged, or not of that format: its reader raised {_reader_error(err)})") from None
+    vertices, faces = shared_vertices(np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64))
+    tile = periodic_tile.checked(key, vertices * scene.scale, faces, scene.tile_sides,
+                                 closed_by_base=config.base is not None)
     return tile, hashlib.sha256(data).hexdigest()
+
+
+def _reader_error(err: Exception) -> str:
+    """A reader's exception in a few words: its type and message (a KeyError's message is only the
+    missing key, as 'y' for a PLY vertex without a y property)."""
+    message = " ".join(str(err).split())[:200]
+    if isinstance(err, KeyError):
+        return f"KeyError: no {message} in the file's declarations"
+    return f"{type(err).__name__}: {message}" if message else type(err).__name__
+
+
+def shared_vertices(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh with each position held once: vertices at exactly the same coordinates made one
+    (the first of them, in their order), the faces re-indexed. Formats that store each triangle's
+    corners apart (STL) then give the connectivity the checks of open edges need; a mesh whose
+    vertices are already distinct is returned as it is."""
+    unique, first, inverse = np.unique(vertices, axis=0, return_index=True, return_inverse=True)
+    if len(unique) == len(vertices):
+        return vertices, faces
+    order = np.argsort(first)  # the kept vertices in the order of their first appearance
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return vertices[np.sort(first)], rank[inverse.reshape(-1)][faces]
 
 
 def check(config) -> None:

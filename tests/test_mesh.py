@@ -76,6 +76,29 @@ def test_a_white_closed_tile_returns_every_path(tmp_path):
     assert table.scene["triangles"] > table.scene["surface_triangles"] == 2 * N * N  # copies beyond the sides
 
 
+@pytest.mark.parametrize("suffix", [".stl", ".glb"])
+def test_a_format_without_shared_vertices_traces_as_the_ply_of_its_triangles(suffix, tmp_path):
+    """STL stores each triangle's corners apart (and trimesh's GLB export, unprocessed, may too):
+    read as they are, every edge would look open and the tile be refused as full of holes. The
+    corners at the same coordinates are one vertex, so the tile (its coordinates float32-exact,
+    as STL stores them) traces as the PLY of the same triangles, bit for bit, and a white one
+    returns every path."""
+    vertices, faces = bumpy()
+    vertices = vertices.astype(np.float32).astype(np.float64)
+    soup = vertices[faces].reshape(-1, 3)  # three vertices of its own for every face
+    loose = write(tmp_path / f"bumps{suffix}", soup, np.arange(len(soup)).reshape(-1, 3))
+    shared = write(tmp_path / "bumps.ply", vertices, faces)
+    assert len(trimesh.load(loose, force="mesh", process=False).vertices) == 3 * len(faces)
+    cfg = mesh_config(loose, theta=(0.0, 60.0))
+    a = tables.load(session.run(cfg, tmp_path / "loose.h5").tables[0])
+    b = tables.load(session.run(mesh_config(shared, theta=(0.0, 60.0)), tmp_path / "shared.h5").tables[0])
+    for name in ("brdf", "brdf_order", "albedo"):
+        assert np.array_equal(a.arrays[name], b.arrays[name]), name
+    assert a.scene["surface_triangles"] == 2 * N * N
+    white = tables.load(session.run(mesh_config(loose, albedo=1.0, theta=(0.0, 89.0)), tmp_path / "w.h5").tables[0])
+    np.testing.assert_allclose(white.albedo, 1.0, rtol=0, atol=1e-12)
+
+
 @pytest.mark.parametrize("make, message", [
     (lambda d: str(d / "absent.obj"), "no such file"),
     (lambda d: write(d / "inverted.ply", *bumpy(flip=True)), "inverted orientation"),
