@@ -49,6 +49,8 @@ KIND = "heightfield"
 INTEGRATOR = "surface"
 #: what sets the scene's size, for the memory refusal (microsim.runner.check_memory)
 SIZE = "take fewer samples (a smaller array in scene.path; a shorter scene.tile or a larger scene.pixel)"
+#: how a .npy and a .npz (a zip file) begin
+NPY_MAGIC, NPZ_MAGIC = b"\x93NUMPY", b"PK\x03\x04"
 #: most samples a side of a height array
 MAX_SAMPLES = 4096
 #: keys of a generated surface only, and of a height file only
@@ -147,6 +149,12 @@ def heights(config) -> tuple[np.ndarray, str]:
     key, file = periodic_tile.source(config)
     try:
         data = file.read_bytes()
+    except OSError as err:
+        raise ValueError(f"{key}: cannot be read ({err.strerror})") from None
+    if not data.startswith((NPY_MAGIC, NPZ_MAGIC)):
+        raise ValueError(f"{key}: not a NumPy file (a .npy starts with {NPY_MAGIC!r}, a .npz is a zip file; this "
+                         f"one starts with {data[:8]!r}): write the heights with numpy.save or numpy.savez")
+    try:
         loaded = np.load(file, allow_pickle=False)
         if isinstance(loaded, np.lib.npyio.NpzFile):
             names = loaded.files

@@ -13,13 +13,13 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import os
 import signal
 import sys
 from pathlib import Path
 
 import click
 
+from . import files
 from .compare import ORDER_ROWS
 from .choices import BACKEND_CHOICES, EXECUTORS, MAX_THREADS, MAX_WORKERS
 from .interrupts import Stopped, die_of, die_on_stop_signals, restore
@@ -127,7 +127,7 @@ def compare(table_path, model_name, params, order, on, as_json, plot_dir):
     table = _load_table(table_path)
     with _user_model_errors(model_name):
         try:
-            result = compare_module.COMPARE_ON[on](table, model, order)
+            result = compare_module.compare(table, model, order, on=on)
         except ValueError as err:  # NaN or infinity in the model's values, data the table lacks (named)
             raise BadInput(str(err)) from None
     _report(result, table, f"{model!r} vs {table_path}", as_json, plot_dir, result.as_dict())
@@ -164,8 +164,9 @@ def fit(table_path, model_name, free, params, order, on, as_json, plot_dir):
             raise BadInput(message if message.startswith(("--", "table")) else f"--model {model_name}: {message}") \
                 from None
     fitted = ", ".join(f"{k} = {v:.6g} +- {e:.2g}" for k, (v, e) in result.free.items())
-    header = (f"fit of {cls.name} to {table_path}: {fitted}; chi^2 / dof = {result.chi2_per_dof:.3g} "
-              f"({result.dof:.1f} dof, {result.evaluations} evaluations)\nbest fit")
+    quality = (f"chi^2 / dof = {result.chi2_per_dof:.3g} ({result.dof:.1f} dof" if result.chi2_per_dof is not None
+               else "no chi^2 / dof (0 dof: the values fitted are exact, or no more than the parameters")
+    header = f"fit of {cls.name} to {table_path}: {fitted}; {quality}, {result.evaluations} evaluations)\nbest fit"
     _report(result.comparison, table, header, as_json, plot_dir, result.as_dict())
 
 
@@ -214,10 +215,7 @@ def export(table_path, fmt, out, force):
     from .tabulated import TabulatedBRDF
 
     out = out if out is not None else table_path.with_suffix(exporters.SUFFIXES[fmt])
-    if out.exists() and not force:
-        raise BadInput(f"--out {out}: exists (pass --force to overwrite)")
-    if not out.parent.is_dir():
-        raise BadInput(f"--out {out}: no directory {out.parent}")
+    _check_output(out, force, {"the table": table_path})
     table = _load_table(table_path)
     try:
         exporters.export(TabulatedBRDF(table), fmt, out)
@@ -230,7 +228,8 @@ def export(table_path, fmt, out, force):
 @click.argument("table_path", metavar="TABLE.h5", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--model", "model_name", help="a model to render beside the table: " + MODEL_HELP)
 @click.option("--param", "params", multiple=True, metavar="KEY=VALUE", help="model parameter, repeatable")
-@click.option("--out", "out", required=True, type=click.Path(dir_okay=False, path_type=Path), help="the PNG to write")
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="the picture to write, in the format of its suffix: .png, .jpg (.jpeg), .pdf or .svg")
 @click.option("--force", is_flag=True, help="overwrite --out if it exists")
 @click.option("--size", type=click.IntRange(16, 4096), default=256, show_default=True, help="pixels a side")
 @click.option("--spp", type=click.IntRange(1, 65536), default=64, show_default=True, help="samples a pixel")
@@ -243,10 +242,11 @@ def render_command(table_path, model_name, params, out, force, size, spp, mesh):
     '.[render]' in microsim's clone)."""
     from .tabulated import TabulatedBRDF
 
-    if out.exists() and not force:
-        raise BadInput(f"--out {out}: exists (pass --force to overwrite)")
-    if not out.parent.is_dir():
-        raise BadInput(f"--out {out}: no directory {out.parent}")
+    from .render import FORMATS
+
+    _check_output(out, force, {"the table": table_path, "the mesh": mesh})
+    if out.suffix.lower() not in FORMATS:
+        raise BadInput(f"--out {out}: the format is taken from the suffix; accepted: {', '.join(FORMATS)}")
     if params and model_name is None:
         raise BadInput("--param: give --model, the model they are parameters of")
     if mesh is not None and (not mesh.is_file() or mesh.suffix.lower() not in (".ply", ".obj")):
@@ -270,12 +270,16 @@ def render_command(table_path, model_name, params, out, force, size, spp, mesh):
                 model = _model_class(model_name)(**_model_parameters(params))
             except ValueError as err:
                 raise BadInput(f"--model {model_name}: {err}") from None
-    with _user_model_errors(model_name or ""):
-        try:
-            images = render.comparison(mitsuba.bsdf(tabulated), None if model is None else mitsuba.bsdf(model),
-                                       size=size, spp=spp, mesh=mesh)
-        except ValueError as err:  # a mesh Mitsuba cannot read
-            raise BadInput(str(err)) from None
+    try:
+        images = render.comparison(mitsuba.bsdf(tabulated), None if model is None else mitsuba.bsdf(model),
+                                   size=size, spp=spp, mesh=mesh)
+    except mitsuba.ModelRaised as err:  # the model's own error, which Mitsuba reports as "(see above)"
+        if err.model is tabulated or ":" not in model_name:  # microsim's own: its traceback
+            raise err.error from None
+        raise BadInput(f"--model {model_name}: evaluating it raised {type(err.error).__name__}: "
+                       f"{' '.join(str(err.error).split())}") from None
+    except ValueError as err:  # a mesh Mitsuba cannot read
+        raise BadInput(str(err)) from None
     render.figure(images, out, (f"table {table_path.name}", repr(model)))
     click.echo(f"render written to {out} (Mitsuba {mitsuba.variant()}, {size} x {size}, {spp} samples a pixel)")
 
@@ -307,17 +311,17 @@ def _on(on_points: bool, on_retro: bool, plot_dir) -> str:
 
 
 def _check_plot_dir(plot_dir) -> None:
-    """BadInput unless the figures' directory ``plot_dir`` exists and is writable or can be made
+    """BadInput unless the figures' directory ``plot_dir`` exists and takes files or can be made
     (checked before the work: a comparison or a fit can take minutes)."""
-    if plot_dir is None:
-        return
-    existing = plot_dir
-    while not existing.exists() and existing != existing.parent:
-        existing = existing.parent
-    if not existing.is_dir():
-        raise BadInput(f"--plot: {existing} is a file; give a directory for the figures")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise BadInput(f"--plot: directory {existing} is not writable")
+    if plot_dir is not None and (why := files.refusal(plot_dir, "--plot", directory=True)):
+        raise BadInput(why)
+
+
+def _check_output(out: Path, force: bool, inputs: dict) -> None:
+    """BadInput, before the work, unless ``out`` can be written (:func:`microsim.files.refusal`):
+    never over one of ``inputs``, with --force or not."""
+    if why := files.refusal(out, force=force, inputs=inputs):
+        raise BadInput(why)
 
 
 def _load_table(table_path):
@@ -382,7 +386,7 @@ def _print_points(result, title) -> None:
 
     unit, _, count, _ = compare_module.ON[result.on]
     rows = result.as_dict()
-    hotelling = rows.get("points_statistic") == "hotelling"
+    hotelling = rows.get("points_statistic") == "hotelling" or "p_value_min" in rows["overall"]
     level = f"{100 * (1 - compare_module.CHI2_OUTSIDE):g} % two-sided"
     if hotelling:
         what = ("points: the model at each exact direction (next-event estimation); per incidence Hotelling's F of "
@@ -404,13 +408,16 @@ def _print_points(result, title) -> None:
     for row in [*rows["per_incidence"], rows["overall"]]:
         where = (f"{row['theta_i_deg']:8.1f} {row['phi_i_deg']:6.1f}" if "theta_i_deg" in row
                  else f"{'overall':>8} {'':>6}")
-        value, (low, high) = row[f"chi2_per_{unit}"], row["chi2_bounds"]
+        value, limits = row[f"chi2_per_{unit}"], row["chi2_bounds"]
         if "hotelling_f" in row:
-            value, (low, high) = row["hotelling_f"], row["hotelling_bounds"]
+            value, limits = row["hotelling_f"], row["hotelling_bounds"]
         p = ""
         if hotelling:
-            p = f" {row['p_value']:8.2g}" if "p_value" in row else f" {row.get('p_value_min', float('nan')):8.2g}"
-        shown, bounds = f"{value:10.3g}", f"[{low:.3g}, {high:.3g}]"
+            p = f" {row['p_value']:8.2g}" if "p_value" in row else f" {row['p_value_min']:8.2g}"
+        if value is None:  # no point with spread: each must equal the model
+            shown, bounds = f"{'exact':>10}", f"|d| <= {compare_module.EXACT_POINT:g} f"
+        else:
+            shown, bounds = f"{value:10.3g}", f"[{limits[0]:.3g}, {limits[1]:.3g}]"
         if hotelling and "theta_i_deg" not in row:  # overall: the smallest p against Bonferroni's level
             shown, bounds = f"{'':>10}", f"p >= {row['bonferroni_level']:.3g}"
         click.echo(f"{where} {row[count]:6d} {row['median_abs_rel_err']:9.4f} {row['rel_rmse']:9.4f} "

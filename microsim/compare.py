@@ -148,6 +148,11 @@ class Comparison:
     #: why the bounds, made for independent estimates, do not hold (:func:`not_independent`); None: they do
     warning: str | None = None
 
+    def _exact_agree(self, i: int | None = None) -> bool:
+        """Whether every exact point (of incidence ``i``, or of all) equals the model to EXACT_POINT."""
+        rows = slice(None) if i is None else slice(i, i + 1)
+        return not np.any(np.abs(self.z[rows][self.exact[rows]]) > 1.0)
+
     def metrics(self, i: int | None = None) -> dict:
         """The metrics of one incidence, or over all incidences (``i=None``)."""
         rows = slice(None) if i is None else slice(i, i + 1)
@@ -254,20 +259,31 @@ class PointComparison:
 
     @property
     def statistic(self) -> str | None:
-        """What judges the points: "hotelling" (the table holds their covariance) or "chi2_1dof"."""
-        return None if self.on != "points" else "chi2_1dof" if self.hotelling is None else "hotelling"
+        """What judges the points: "hotelling" (the table holds their covariance), "chi2_1dof", or
+        "exact" (no point has spread: each must equal the model to EXACT_POINT)."""
+        if self.on != "points":
+            return None
+        if not (self.judged & ~self.exact).any():
+            return "exact"
+        return "chi2_1dof" if self.hotelling is None else "hotelling"
 
     def incidence_test(self, i: int) -> tuple[str, float, bool]:
         """(statistic, two-sided p-value, relations held) of incidence i of a table with the
         points' covariance: Hotelling's test, the bounds of one degree of freedom where it has
-        none, or "exact" where no point has spread (p 1)."""
+        none, or "exact" where no point has spread (p 1 where each equals the model to
+        EXACT_POINT, else 0)."""
         h = self.hotelling[i]
         if h is not None:
             return "hotelling", h.p, h.relations_hold
         noisy = self.judged[i] & ~self.exact[i]
         if not noisy.any():
-            return "exact", 1.0, True
+            return "exact", float(self._exact_agree(i)), True
         return "chi2_1dof", chi2_1dof_p(float(np.mean(self.terms[i][noisy]))), True
+
+    def _exact_agree(self, i: int | None = None) -> bool:
+        """Whether every exact point (of incidence ``i``, or of all) equals the model to EXACT_POINT."""
+        rows = slice(None) if i is None else slice(i, i + 1)
+        return not np.any(np.abs(self.z[rows][self.exact[rows]]) > 1.0)
 
     def metrics(self, i: int | None = None) -> dict:
         """The metrics of one incidence, or over all incidences (``i=None``)."""
@@ -277,9 +293,11 @@ class PointComparison:
         rel = (m[seen] - s[seen]) / s[seen]
         z = self.z[rows][ok]
         noisy = ok & ~exact
-        chi2 = float(np.mean(self.terms[rows][noisy])) if noisy.any() else float("nan")
-        low, high = chi2_bounds(self.kurtosis[rows][noisy], self.common[rows][noisy])
-        agree = not np.any(np.abs(self.z[rows][exact]) > 1.0)
+        # without a point with spread there is no chi-square (None, as its bounds): the exact
+        # points' agreement is the whole verdict
+        chi2 = float(np.mean(self.terms[rows][noisy])) if noisy.any() else None
+        bounds = list(chi2_bounds(self.kurtosis[rows][noisy], self.common[rows][noisy])) if noisy.any() else None
+        agree = self._exact_agree(i)
         unit, _, count, _ = ON[self.on]
         out = {
             count: int(ok.sum()),
@@ -288,9 +306,9 @@ class PointComparison:
             "max_abs_z": float(np.max(np.abs(z))) if z.size else float("nan"),
             f"chi2_per_{unit}": chi2,
             "chi2_expected": 1.0,
-            "chi2_bounds": [low, high],
+            "chi2_bounds": bounds,
             # None where nothing is judged
-            "consistent": bool(agree and (not noisy.any() or low <= chi2 <= high)) if ok.any() else None,
+            "consistent": bool(agree and (not noisy.any() or bounds[0] <= chi2 <= bounds[1])) if ok.any() else None,
         }
         if self.on == "points":
             out["points_without_spread"] = int(exact.sum())
@@ -305,10 +323,11 @@ class PointComparison:
         """The keys of a table with the points' covariance (module doc): an incidence's test, or
         over all, the smallest p-value against the Bonferroni level; ``consistent`` from them and
         ``agree`` (every exact point equal)."""
-        tested = [n for n in range(len(self.theta_i)) if (self.judged[n] & ~self.exact[n]).any()]
+        tested = [n for n in range(len(self.theta_i)) if self.judged[n].any()]
         if i is None:
             tests = [self.incidence_test(n) for n in tested]
-            level = CHI2_OUTSIDE / max(len(tests), 1)
+            # exact incidences (p 0 or 1) are no tests of chance: the level divides among the others
+            level = CHI2_OUTSIDE / max(sum(t[0] != "exact" for t in tests), 1)
             p = min((t[1] for t in tests), default=1.0)
             return {"p_value_min": p, "bonferroni_level": level,
                     "incidences_chi2_1dof": sum(t[0] == "chi2_1dof" for t in tests),
@@ -450,11 +469,21 @@ class CellRule:
         return np.bincount(self.cells, weights=model(self.wi, self.nodes) * self.weights, minlength=self.n_cells)
 
 
-def compare(table, model, order: str = "all", **params) -> Comparison:
-    """Average ``model`` over the cells of ``table`` (a :class:`microsim.tables.Table`) and compare;
-    ValueError (one line) if no cell has signal. ``model``: a model (``models.create(...)``), a
-    registered model's name, a :class:`~microsim.models.BRDFModel` subclass or a plain function
-    ``f(wi, wo, **params)`` (:mod:`microsim.models.user_models`), made with ``params``."""
+def compare(table, model, order: str = "all", on: str = "cells", **params) -> Comparison | PointComparison:
+    """Compare ``model`` with ``table`` (a :class:`microsim.tables.Table`) on what ``on`` names, as
+    :func:`microsim.fit.fit` takes it: "cells" (:func:`compare_cells`), "points"
+    (:func:`compare_points`) or "retro" (:func:`compare_retro`, the retro rings); ValueError (one
+    line) for another ``on``. ``model``: a model (``models.create(...)``), a registered model's
+    name, a :class:`~microsim.models.BRDFModel` subclass or a plain function ``f(wi, wo, **params)``
+    (:mod:`microsim.models.user_models`), made with ``params``."""
+    if on not in COMPARE_ON:
+        raise ValueError(f"on = {on!r}: accepted: {', '.join(map(repr, COMPARE_ON))}")
+    return COMPARE_ON[on](table, model, order, **params)
+
+
+def compare_cells(table, model, order: str = "all", **params) -> Comparison:
+    """Average ``model`` over the cells of ``table`` and compare (module doc); ValueError (one
+    line) if no cell has signal. ``model`` and ``params`` as :func:`compare` takes them."""
     from .models import as_model
 
     model = as_model(model, **params)
@@ -630,7 +659,7 @@ def compare_retro(table, model, order: str = "all", **params) -> PointComparison
 
 
 #: what compares a model with a table, by what it compares on
-COMPARE_ON = {"cells": compare, "points": compare_points, "retro": compare_retro}
+COMPARE_ON = {"cells": compare_cells, "points": compare_points, "retro": compare_retro}
 
 
 def ring_averages(model, sensor, wi: np.ndarray, stderr: np.ndarray, tolerance: float = QUADRATURE_TOLERANCE):

@@ -57,10 +57,9 @@ class Illumination(Section):
         description="one azimuth for all incidences, or one per theta_i_deg")
     incidences: int | None = Field(
         None, ge=2, le=MAX_INCIDENCES, description="a full BRDF: this many polar angles at the centres of the "
-        "sensor's rings, as evenly as whole rings allow, from normal incidence to the last ring, instead of "
-        "theta_i_deg "
-        "(microsim.full_brdf; what `--model table` and `microsim export` need: cos theta_i gaps of 0.25 at most, "
-        "about 7 incidences or more)")
+        "sensor's rings, from normal incidence to the last ring, those between keeping the widest gap in "
+        "cos theta_i least, instead of theta_i_deg (microsim.full_brdf; what `--model table` and `microsim export` "
+        "need: cos theta_i gaps of 0.25 at most, 6 incidences or more; fewer are refused before tracing)")
     azimuths: int | None = Field(None, ge=1, le=64, description="with incidences: each polar angle but 0 at this "
                                  "many azimuths 360 j / azimuths (an anisotropic scene's full BRDF; 1 if left out)")
 
@@ -97,7 +96,8 @@ class SensorSection(Section):
                              "apart from the cells (0: none); see microsim.sensor")
     retro_max_deg: float = Field(10.0, gt=0.0, le=90.0, description="phase angle the retro rings reach, deg")
     directions_deg: list[list[float]] = Field(
-        [], description="exact directions [theta_o, phi_o] (phi_o the relative azimuth), deg, theta_o in [0, 90), "
+        [], description="exact directions [theta_o, phi_o] (phi_o the relative azimuth phi_o - phi_i; the "
+                        "cells' azimuths are the scene's), deg, theta_o in [0, 90), "
                         f"phi_o in [-360, 360]: f there by next-event estimation (at most {MAX_POINTS} points "
                         "with retro_points_deg)")
     retro_points_deg: list[float] = Field(
@@ -140,7 +140,9 @@ class SensorSection(Section):
     def _at_most_max_points(self):
         count = len(self.directions_deg) + len(self.retro_points_deg)
         if count > MAX_POINTS:
-            raise ValueError(f"sensor.directions_deg: {len(self.directions_deg):,} directions and "
+            # the key of the longer list: the one to shorten
+            key = "directions_deg" if len(self.directions_deg) >= len(self.retro_points_deg) else "retro_points_deg"
+            raise ValueError(f"sensor.{key}: {len(self.directions_deg):,} directions_deg and "
                              f"{len(self.retro_points_deg):,} retro_points_deg, {count:,} points; accepted: at "
                              f"most {MAX_POINTS} points together (each costs a shadow ray per scattering event)")
         return self

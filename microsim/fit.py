@@ -104,8 +104,8 @@ class Fit:
     comparison of the best model with the table."""
 
     free: dict  # name -> (value, standard error)
-    chi2_per_dof: float
-    dof: float  # the cells' (rings') expected share of chi-square or the points, less the free parameters
+    chi2_per_dof: float | None  # None without degrees of freedom
+    dof: float  # the cells' (rings') expected share of chi-square or the points, less the free parameters (>= 0)
     evaluations: int
     comparison: compare.Comparison | compare.PointComparison
     notes: dict = field(default_factory=dict)  # keys added to as_dict (how the points were weighed)
@@ -156,7 +156,7 @@ def fit(table, model, free: list[str], fixed: dict | None = None, order: str = "
 
     first = model_at(start)  # a bad fixed parameter fails here, in one line
     if on not in FITTED_ON:
-        raise ValueError(f"on {on!r}; accepted: {', '.join(FITTED_ON)}")
+        raise ValueError(f"on = {on!r}: accepted: {', '.join(map(repr, FITTED_ON))}")
     data = FITTED_ON[on](table, first, order, len(free))
     evaluated = [0]
 
@@ -177,12 +177,14 @@ def fit(table, model, free: list[str], fixed: dict | None = None, order: str = "
         moved, x = np.abs(solution.x - x), solution.x
         if data.per_path is None or np.all(moved <= CONVERGED * errors):
             break
-    dof = data.dof(values(solution.x)) - len(free)
+    # no degrees of freedom left (every point fitted exact, or no more values than parameters):
+    # no chi-square per degree of freedom, and 0 of them, not fewer
+    dof = max(data.dof(values(solution.x)) - len(free), 0.0)
     chi2 = data.chi2(solution.fun)
     best = model_at(solution.x)
     return Fit({name: (float(v), float(e)) for name, v, e in zip(free, solution.x, errors)},
-               chi2 / dof if dof > 0 else math.nan, dof, int(evaluations),
-               compare.COMPARE_ON[on](table, best, order), data.notes)
+               chi2 / dof if dof > 0 else None, dof, int(evaluations),
+               compare.compare(table, best, order, on=on), data.notes)
 
 
 @dataclass

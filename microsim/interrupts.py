@@ -143,7 +143,40 @@ def die_on_stop_signals() -> dict:
     return installed
 
 
+#: temporary files to remove before a stop signal ends the process at once (:func:`remove_on_stop`)
+_PENDING: set = set()
+
+
+@contextlib.contextmanager
+def remove_on_stop():
+    """``with remove_on_stop() as made:``, ``path = made(create)`` calls ``create()`` (which makes
+    a file and returns its path) with the stop signals held, so that no signal falls between the
+    file's making and its noting; until the block ends, a stop signal that ends the process at
+    once (:func:`die_on_stop_signals`) removes the file first. (One that raises, as
+    :class:`StopOnSignals` does, unwinds to the caller's own clean-up.)"""
+    noted = []
+
+    def made(create):
+        held = signal.pthread_sigmask(signal.SIG_BLOCK, set(STOP_SIGNALS)) if _main_thread() else None
+        try:
+            path = create()
+            noted.append(path)
+            _PENDING.add(path)
+        finally:
+            if held is not None:
+                signal.pthread_sigmask(signal.SIG_SETMASK, held)
+        return path
+
+    try:
+        yield made
+    finally:
+        _PENDING.difference_update(noted)
+
+
 def _stop_now(signum, frame):
+    for path in list(_PENDING):
+        with contextlib.suppress(OSError):
+            os.unlink(path)
     if sys.stderr.isatty():  # a progress line may be drawn: clear it, and show the cursor it hid
         sys.stderr.write("\r\x1b[2K\x1b[?25h")
     sys.stderr.write(f"microsim: error: stopped by {signal.Signals(signum).name}\n")

@@ -60,6 +60,22 @@ def bsdf(model):
     return _bsdf_class(mi)(mi.Properties("microsim"), model)
 
 
+class ModelRaised(Exception):
+    """A render ended because the model a BSDF wraps raised ``error`` (Mitsuba itself reports it
+    only as "(see above)")."""
+
+    def __init__(self, model, error: Exception):
+        self.model, self.error = model, error
+        super().__init__(f"evaluating {model!r} raised {type(error).__name__}: {' '.join(str(error).split())}")
+
+
+def raised(bsdf, err: Exception) -> Exception:
+    """What a render that ended in ``err`` raised in truth: :class:`ModelRaised` of the first
+    exception ``bsdf``'s methods raised (the model's own), else ``err``."""
+    kept = getattr(bsdf, "error", None)
+    return ModelRaised(bsdf.model, kept) if kept is not None else err
+
+
 def _model_of(props):
     """The model of the plugin's properties: ``filename`` (a table), or ``model`` and its parameters."""
     from . import models
@@ -104,12 +120,28 @@ def _make_class(mi):
     def vectors(values: np.ndarray):
         return mi.Vector3f(*values.T) if jit else mi.Vector3f(*values[0])
 
+    def keeping_errors(method):
+        """``method``, whose first exception is kept in ``self.error`` before it goes on into
+        Mitsuba, which reports it only as "(see above)": the caller of the render raises it
+        (:func:`raised`)."""
+
+        def kept(self, *args, **kwargs):
+            try:
+                return method(self, *args, **kwargs)
+            except Exception as err:
+                if self.error is None:
+                    self.error = err
+                raise
+
+        return kept
+
     class MicrosimBSDF(mi.BSDF):
         """A microsim model as a Mitsuba BSDF (module doc)."""
 
         def __init__(self, props, model):
             mi.BSDF.__init__(self, props)
             self.model = model
+            self.error = None  # the first exception a method raised (keeping_errors)
             self.sampled = hasattr(model, "sample") and hasattr(model, "pdf")
             self.m_flags = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
             self.m_components = [self.m_flags]
@@ -127,16 +159,20 @@ def _make_class(mi):
                 return self.model.pdf(wi, wo)
             return np.where((wi[:, 2] > 0) & (wo[:, 2] > 0), wo[:, 2] / np.pi, 0.0)
 
+        @keeping_errors
         def eval(self, ctx, si, wo, active=True):
             return mi.Color3f(floats(self._f(*together(rows(si.wi), rows(wo)))))
 
+        @keeping_errors
         def pdf(self, ctx, si, wo, active=True):
             return floats(self._pdf(*together(rows(si.wi), rows(wo))))
 
+        @keeping_errors
         def eval_pdf(self, ctx, si, wo, active=True):
             wi, wo = together(rows(si.wi), rows(wo))
             return mi.Color3f(floats(self._f(wi, wo))), floats(self._pdf(wi, wo))
 
+        @keeping_errors
         def sample(self, ctx, si, sample1, sample2, active=True):
             wi, u1, u2 = together(rows(si.wi), rows(sample1), rows(sample2))
             u1, n = u1[:, 0], len(wi)

@@ -21,6 +21,9 @@ class Progress:
         """A run of ``plan`` starts; compiling its tracer, if needed, takes about
         ``compile_seconds`` here (the tracer class's ``COMPILE_SECONDS``)."""
 
+    def note(self, text: str) -> None:
+        """Before the run: something its user should know now (why it will be slow)."""
+
     def compiling(self) -> None:
         """numba began compiling (called from the thread that compiles)."""
 
@@ -67,6 +70,9 @@ class ProgressBar(Progress):
                 self.bar.start()
             units = len(plan.units)
             self.task = self.bar.add_task("tracing", total=units, status=f"0/{units} units")
+
+    def note(self, text: str) -> None:
+        sys.stderr.write(f"note: {text}\n")
 
     def compiling(self) -> None:
         if self.bar is not None:

@@ -26,6 +26,8 @@ LIGHTS = ("directional", "environment")
 CAMERA_DISTANCE, FIELD_OF_VIEW = 5.0, 30.0
 #: mesh files Mitsuba reads, by suffix
 MESH_TYPES = {".ply": "ply", ".obj": "obj"}
+#: the suffixes of a render's file -> the format matplotlib writes it in
+FORMATS = {".png": "png", ".jpg": "jpeg", ".jpeg": "jpeg", ".pdf": "pdf", ".svg": "svg"}
 
 
 def scene(bsdf, light: str, size: int, spp: int, mesh: Path | None = None):
@@ -66,7 +68,11 @@ def _object(mi, bsdf, mesh: Path | None) -> dict:
 def render(bsdf, light: str, size: int = 256, spp: int = 64, seed: int = 0, mesh: Path | None = None):
     """The grey radiance (the red channel; the BRDFs are grey), (size, size)."""
     mi = plugin.load()
-    return np.asarray(mi.render(scene(bsdf, light, size, spp, mesh), spp=spp, seed=seed), dtype=np.float64)[..., 0]
+    try:
+        image = mi.render(scene(bsdf, light, size, spp, mesh), spp=spp, seed=seed)
+    except Exception as err:
+        raise plugin.raised(bsdf, err) from None
+    return np.asarray(image, dtype=np.float64)[..., 0]
 
 
 def coverage(size: int = 256, spp: int = 64, mesh: Path | None = None) -> np.ndarray:
@@ -97,9 +103,9 @@ def comparison(table_bsdf, model_bsdf=None, size: int = 256, spp: int = 64, seed
 
 
 def figure(images: dict, out: Path, labels: tuple[str, str]) -> Path:
-    """The PNG of :func:`comparison`'s ``images`` at ``out`` (written under a temporary name and
-    renamed): a row for each light, the table, the model (``labels``: their titles) and the
-    relative difference, with colour bars."""
+    """The picture of :func:`comparison`'s ``images`` at ``out``, in the format of its suffix
+    (FORMATS; written under a temporary name and renamed): a row for each light, the table, the
+    model (``labels``: their titles) and the relative difference, with colour bars."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -127,8 +133,8 @@ def figure(images: dict, out: Path, labels: tuple[str, str]) -> Path:
         axis.set_yticks([])
     fig.tight_layout()
     try:
-        with atomic(out, suffix=".png") as tmp:
-            fig.savefig(tmp, dpi=110)
+        with atomic(out, suffix=out.suffix) as tmp:
+            fig.savefig(tmp, dpi=110, format=FORMATS[out.suffix.lower()])
     finally:
         plt.close(fig)
     return out

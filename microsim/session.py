@@ -26,6 +26,7 @@ import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from . import files
 from .choices import EXECUTORS, MAX_THREADS, MAX_WORKERS
 from .interrupts import IgnoredOnceDone, StopOnSignals, Stopped
 from .orders import RESULT_ALL_ORDERS
@@ -155,6 +156,10 @@ class RunOutcome:
             notes.extend(_energy_notes(plan, result))
         if plan.backend_note:
             notes.append(f"note: {plan.backend_note}")
+        from geometry.periodic_tile import steepness_note
+
+        if (steep := steepness_note(plan.scene)) and self.results[0].units_traced:
+            notes.append(f"note: {steep}: {self.paths_per_second:.3g} paths/s here")
         return notes
 
 
@@ -261,6 +266,10 @@ def run(config, out=None, *, progress: Progress | None = None, on_point=None, on
         _refuse_input(path, config_path)
         _check_writable(path, options.force)
     _check_memory(plan, options)
+    from geometry.periodic_tile import steepness_note
+
+    if note := steepness_note(plan.scene):
+        progress.note(note)
     return _trace(validated, plan, outs, out, options, progress, once_done=once_done)
 
 
@@ -308,9 +317,8 @@ def _run_sweep(points, out_dir: Path, options: Options, config_path: Path | None
     if out_dir.is_dir() and any(out_dir.iterdir()) and not (options.force or options.resume):
         raise RunRefused(f"--out: directory {out_dir} is not empty; pass --resume to continue the sweep in it, or "
                          "--force to overwrite its tables")
-    parent = out_dir.parent if str(out_dir.parent) else Path(".")
-    if not parent.is_dir() or not os.access(parent, os.W_OK):
-        raise RunRefused(f"--out: directory {parent} does not exist or is not writable")
+    if why := files.refusal(out_dir, directory=True):
+        raise RunRefused(why)
     plans, kept = [], []
     for point in points:  # every refusal before anything is traced
         label = f"sweep point {point.name}: "
@@ -324,7 +332,7 @@ def _run_sweep(points, out_dir: Path, options: Options, config_path: Path | None
             except unit_store.StoreMismatch as err:
                 raise RunRefused(f"{label}{err}") from None
         plans.append(plan)
-    out_dir.mkdir(exist_ok=True)
+    out_dir.mkdir(parents=True, exist_ok=True)
     keys = list(points[0].values)
     rows = [{"point": p.name, **{k: p.values[k] for k in keys}, "table": f"{p.name}.h5", "status": "pending"}
             for p in points]
@@ -491,18 +499,10 @@ def _check_dask(scheduler) -> None:
 
 def _refuse_input(out: Path, config_path: Path | None) -> None:
     """RunRefused if the table ``out`` would replace the config it is traced from (force or not)."""
-    if config_path is None:
-        return
-    same = out.resolve() == config_path.resolve() or (out.exists() and os.path.samefile(out, config_path))
-    if same:
+    if config_path is not None and files.same_file(out, config_path):
         raise RunRefused(f"--out: {out} is the config file {config_path}; give the table another name")
 
 
 def _check_writable(out: Path, force: bool) -> None:
-    if out.exists() and not force:
-        raise RunRefused(f"--out: {out} exists; pass --force to overwrite it")
-    parent = out.parent if str(out.parent) else Path(".")
-    if not parent.is_dir():
-        raise RunRefused(f"--out: directory {parent} does not exist")
-    if not os.access(parent, os.W_OK):
-        raise RunRefused(f"--out: directory {parent} is not writable")
+    if why := files.refusal(out, force=force):
+        raise RunRefused(why)

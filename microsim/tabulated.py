@@ -41,14 +41,13 @@ from typing import NamedTuple
 import numpy as np
 from scipy import sparse
 
+from .files import not_a_file
 from .frames import direction
+from .full_brdf import MAX_COS_GAP, widest_gap
 from .models.base import BRDFModel, Param, register
 from .table_noise import realization_scale, realizations
 from .tables import Table, load
 
-#: the widest gap in cos(theta_i) a table's incidences may leave (between two, and from the
-#: first to normal incidence and the last to the horizon) to be taken for a full BRDF
-MAX_COS_GAP = 0.25
 #: pairs of directions evaluated at once (their coefficients take 0.5 kB a pair)
 CHUNK = 65536
 #: incidences whose polar angles (or azimuths) differ by less than this are one (radians)
@@ -118,10 +117,7 @@ class IncidenceGrid:
 
     def gaps(self) -> tuple[float, float]:
         """(the widest gap in cos(theta_i), the cosine it starts from), the ends 1 and 0 included."""
-        nodes = np.concatenate([[1.0], self.mu, [0.0]])
-        gap = -np.diff(nodes)
-        k = int(np.argmax(gap))
-        return float(gap[k]), float(nodes[k])
+        return widest_gap(self.mu)
 
 
 def _distinct(values: np.ndarray) -> np.ndarray:
@@ -205,8 +201,8 @@ class TabulatedBRDF(BRDFModel):
 
     def setup(self) -> None:
         if self.table is None:
-            if not Path(self.path).is_file():
-                raise ValueError(f"path = {self.path!r}: no such file")
+            if why := not_a_file(self.path):
+                raise ValueError(f"path = {self.path!r}: {why}")
             try:
                 self.table = load(self.path)
             except OSError as err:

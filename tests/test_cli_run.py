@@ -81,6 +81,24 @@ def test_the_table_never_replaces_its_config(tmp_path, capsys, how):
         assert config.read_text() == text
 
 
+@pytest.mark.parametrize("sweep", [False, True])
+def test_a_table_into_a_folder_nothing_can_write_in_is_refused_in_one_line(tmp_path, capsys, sweep):
+    """/sys takes no new file, even from root, whose permission bits say it may: the table (or a
+    sweep's folder) is refused in one line before anything is traced, not with the traceback of
+    the unit store's mkdir."""
+    text = SPHERES.replace("paths = 20_000", "paths = 200")
+    if sweep:
+        text += '[sweep]\n"material.albedo" = [0.5, 0.6]\n'
+    config = tmp_path / "c.toml"
+    config.write_text(text)
+    out = "/sys/points" if sweep else "/sys/table.h5"
+    assert main(["run", str(config), "--out", out]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and "--out" in lines[0] and "/sys" in lines[0] and "not writable" in lines[0], lines
+    assert list(tmp_path.iterdir()) == [config]
+
+
 def test_existing_table_is_not_overwritten_without_force(tmp_path, capsys):
     config = tmp_path / "small.toml"
     config.write_text(SPHERES.replace("paths = 20_000", "paths = 200"))

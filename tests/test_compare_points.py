@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -323,17 +324,53 @@ def test_the_text_report_has_no_albedo_rows(medium, capsys):
 # ------------------------------------------------------------------------------- a plane: exact points
 
 
-def test_a_plane_s_points_are_exact(plane):
+def test_a_plane_s_points_are_exact(plane, capsys):
+    """Every path adds exactly albedo / pi: no spread, so no chi-square (None, not NaN), and a
+    verdict that follows the p-value: 1 where the model equals the points to EXACT_POINT, 0 where
+    it is 1e-7 off; a fit meets them with 0 degrees of freedom, not fewer, and no chi^2 / dof."""
     table = tables.load(plane)
-    right = compare.compare_points(table, "lambert", albedo=0.5).as_dict()["overall"]
-    assert right["consistent"] and right["points_without_spread"] == right["points_compared"] == 9
-    assert math.isnan(right["chi2_per_point"])  # no point with spread: nothing for chi-square
-    off = compare.compare_points(table, "lambert", albedo=0.5 * (1 + 1e-7)).as_dict()["overall"]
-    assert not off["consistent"] and off["max_abs_z"] > 1
-    from microsim import fit
-
-    value, error = fit.fit(table, "lambert", ["albedo"], {"albedo": 0.3}, on="points").free["albedo"]
+    for albedo, consistent, p in ((0.5, True, 1.0), (0.5 * (1 + 1e-7), False, 0.0)):
+        result = compare.compare_points(table, "lambert", albedo=albedo).as_dict()
+        rows = [*result["per_incidence"], result["overall"]]
+        assert all(r["chi2_per_point"] is None and r["chi2_bounds"] is None for r in rows)
+        assert all(r["consistent"] is consistent for r in rows)
+        assert [r["p_value"] for r in result["per_incidence"]] == [p] * len(result["per_incidence"])
+        assert result["overall"]["p_value_min"] == p and result["overall"]["points_statistic"] == "exact"
+        assert result["overall"]["points_without_spread"] == result["overall"]["points_compared"] == 9
+        assert main(["compare", str(plane), "--model", "lambert", "--param", f"albedo={albedo!r}", "--points"]) == 0
+        text = capsys.readouterr().out.split(" vs ", 1)[1].split(")", 1)[1]  # after the table's path
+        assert "nan" not in text.lower() and all(line.split()[-1] == ("consistent" if consistent else "inconsistent")
+                                                  for line in text.splitlines()[2:]), text
+        assert main(["compare", str(plane), "--model", "lambert", "--param", f"albedo={albedo!r}", "--points",
+                     "--json"]) == 0
+        json.loads(capsys.readouterr().out, parse_constant=lambda name: pytest.fail(f"{name} in the JSON"))
+    fitted = fit.fit(table, "lambert", ["albedo"], {"albedo": 0.3}, on="points")
+    value, error = fitted.free["albedo"]
     assert value == pytest.approx(0.5, rel=1e-9) and error < 1e-8
+    assert fitted.dof == 0 and fitted.chi2_per_dof is None
+    assert main(["fit", str(plane), "--model", "lambert", "--free", "albedo", "--points"]) == 0
+    header = capsys.readouterr().out.splitlines()[0]
+    verdict = header.split("; ", 1)[1]  # after the fitted albedo (and the table's path, which may hold anything)
+    assert "nan" not in verdict and not re.search(r"-[\d.]+ dof", verdict) and "(0 dof" in verdict, header
+
+
+def test_compare_and_fit_take_one_on_keyword_from_python(plane, medium):
+    """compare.compare(table, model, on=...) is what fit.fit(..., on=...) takes: the points, the
+    retro rings or the cells, each as its own function gives it; another value is refused in
+    one line by both."""
+    exact, rings = tables.load(plane), tables.load(medium[0])
+    for table, on, direct, model, albedo in (
+            (exact, "points", compare.compare_points, "lambert", 0.5),
+            (exact, "cells", compare.compare_cells, "lambert", 0.5),
+            (rings, "retro", compare.compare_retro, "lambert", 0.5)):
+        result = compare.compare(table, model, "1" if table is rings else "all", on=on, albedo=albedo).as_dict()
+        assert result == direct(table, model, "1" if table is rings else "all", albedo=albedo).as_dict()
+        assert result.get("on", "cells") == on
+    for call in (lambda: compare.compare(exact, "lambert", on="rings", albedo=0.5),
+                 lambda: fit.fit(exact, "lambert", ["albedo"], on="rings")):
+        with pytest.raises(ValueError, match=r"^on = 'rings': accepted: ") as refused:
+            call()
+        assert sorted(str(refused.value).split("accepted: ")[1].split(", ")) == ["'cells'", "'points'", "'retro'"]
 
 
 # ------------------------------------------------------------------------------- bad input

@@ -52,6 +52,21 @@ def test_the_check_sees_what_is_missing(site_text):
     assert "--no-such-option" not in set(re.findall(r"[^\s,;()\[\]]+", site_text))
 
 
+def test_the_home_page_lists_every_scene_kind_and_the_frames_are_stated_once():
+    """The home page's table of scenes links every registered kind's page; the pages that say in
+    which frame a table's cells lie say the scene's (the cells' azimuths are phi_o itself), and
+    none says the cells are in relative azimuth."""
+    from geometry import SCENES
+
+    home = (ROOT / "docs" / "index.md").read_text()
+    table = home.split("## What it traces")[1].split("\n\n")[1]
+    assert sorted(re.findall(r"\(guide/scenes/(\w+)\.md\)", table)) == sorted(SCENES)
+    for page in ("conventions.md", "guide/config.md", "reference/table-format.md", "guide/points.md"):
+        text = " ".join((ROOT / "docs" / page).read_text().split())
+        assert "scene's frame" in text or "the scene's" in text, page
+        assert not re.search(r"cells?[^.]{0,40}(in|are|lie in) (the )?relative azimuth", text), page
+
+
 def getting_started_commands() -> list[str]:
     page = (ROOT / "docs" / "getting-started.md").read_text()
     blocks = re.findall(r"```bash\n(.*?)```", page, re.S)

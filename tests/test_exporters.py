@@ -150,3 +150,55 @@ def assert_refused(argv, capsys, *words):
     captured = capsys.readouterr()
     lines = captured.err.strip().splitlines()
     assert len(lines) == 1 and all(w in lines[0] for w in words) and captured.out == "", captured.err
+
+
+def test_no_export_writes_over_its_own_table(full, tmp_path, capsys):
+    """`--out` the table itself (or a hard link to it) is refused, with --force or not: the export
+    would replace the only copy of the BRDF it reads."""
+    table = tmp_path / "own.h5"
+    table.write_bytes(full.read_bytes())
+    link = tmp_path / "link.binary"
+    link.hardlink_to(table)
+    before = table.read_bytes()
+    for out in (table, link):
+        for force in ([], ["--force"]):
+            assert_refused(["export", str(table), "--format", "merl", "--out", str(out), *force], capsys,
+                           "--out", "the table", "another name")
+    assert table.read_bytes() == before
+
+
+@pytest.mark.parametrize("fmt", ["merl", "netcdf-grid"])
+def test_an_unwritable_folder_is_refused_before_the_work(full, capsys, fmt):
+    """A folder nothing can write in, even root (/sys: permission bits say writable to root), is
+    refused in one line before the table is read."""
+    assert_refused(["export", str(full), "--format", fmt, "--out", "/sys/brdf.out"], capsys,
+                   "--out", "/sys", "not writable")
+
+
+SLOW_EXPORT = """
+import sys, time
+from microsim import exporters
+from microsim.cli import main
+
+def slow(tabulated, path):
+    path.write_bytes(b"half")
+    time.sleep(120)
+
+exporters.WRITERS["merl"] = slow
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_ctrl_c_during_an_export_leaves_no_temporary(full, tmp_path):
+    """Ctrl-C while the file is written: one line, the process dies of SIGINT, and neither the
+    output nor its temporary is left in the folder."""
+    import signal
+    import sys
+
+    from test_signals import interrupt_group
+
+    out = tmp_path / "brdf.binary"
+    command = [sys.executable, "-c", SLOW_EXPORT, "export", str(full), "--format", "merl", "--out", str(out)]
+    status, stderr = interrupt_group(command, tmp_path, lambda process: any(tmp_path.glob(".brdf.binary.*")))
+    assert status == -signal.SIGINT and stderr == "microsim: error: stopped by SIGINT\n", stderr
+    assert list(tmp_path.iterdir()) == []

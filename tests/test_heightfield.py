@@ -63,7 +63,7 @@ def test_the_grid_wraps_at_the_period():
     (lambda d: np.save(d / "nan.npy", np.where(np.eye(8) > 0, np.nan, 0.0)) or str(d / "nan.npy"), "NaN"),
     (lambda d: np.save(d / "wide.npy", np.zeros((8, 16))) or str(d / "wide.npy"), "square array"),
     (lambda d: np.savez(d / "two.npz", a=np.zeros((8, 8)), b=np.zeros((8, 8))) or str(d / "two.npz"), "'height'"),
-    (lambda d: (d / "text.npy").write_text("no array") and str(d / "text.npy"), "cannot be read"),
+    (lambda d: (d / "text.npy").write_text("no array") and str(d / "text.npy"), "not a NumPy file"),
 ])
 def test_a_bad_height_array_is_refused_in_one_line(make, message, tmp_path, tmp_path_factory, capsys):
     from refusals import SMALL_RUN, assert_run_refused
@@ -87,3 +87,28 @@ def test_the_cells_are_split_along_alternating_diagonals():
 
     assert diagonal(0) == [(0.0, 0.0), (1.0, 1.0)] and diagonal(3) == [(0.0, 0.0), (1.0, 1.0)]
     assert diagonal(1) == [(0.0, 1.0), (1.0, 0.0)] and diagonal(2) == [(0.0, 1.0), (1.0, 0.0)]
+
+
+def test_a_steep_surface_is_said_to_be_slow_before_it_traces_and_its_rate_after(tmp_path, capsys):
+    """Integer heights times 100 at pixel 0.1 (a surface 2500 times its tile's area) trace many
+    times slower than a gentle one: the run says so before it traces (stderr), and after it with
+    the rate it measured; a gentle surface gets no such note."""
+    from microsim.cli import main
+
+    rng = np.random.default_rng(1)
+    notes = {}
+    for name, heights, scale in (("steep", rng.integers(0, 5, (16, 16)).astype(float), 100.0),
+                                 ("gentle", 0.05 * rng.normal(size=(16, 16)), 1.0)):
+        np.save(tmp_path / f"{name}.npy", heights)
+        (tmp_path / f"{name}.toml").write_text(
+            f'[scene]\nkind = "heightfield"\npath = "{tmp_path / name}.npy"\npixel = 0.1\nheight_scale = {scale}\n'
+            '[material]\nkind = "lambert"\nalbedo = 0.8\n[illumination]\ntheta_i_deg = [30.0]\n[sensor]\ncells = 50\n'
+            '[run]\npaths = 2000\nrealizations = 2\n')
+        assert main(["run", str(tmp_path / f"{name}.toml"), "--out", str(tmp_path / f"{name}.h5")]) == 0
+        notes[name] = capsys.readouterr()
+    before = notes["steep"].err.strip().splitlines()
+    assert len(before) == 1 and before[0].startswith("note: scene: a steep surface") and "times the tile's area" in \
+        before[0], before
+    after = [line for line in notes["steep"].out.splitlines() if "steep surface" in line]
+    assert len(after) == 1 and after[0].endswith("paths/s here"), notes["steep"].out
+    assert "steep surface" not in notes["gentle"].err + notes["gentle"].out

@@ -239,21 +239,26 @@ def _file(name: str, content):
 
 #: (make a file in a directory, extra [scene] lines, what the line says after "scene.path = '...': ")
 BAD_MESHES = [
-    (_file("half.ply", _cut("ply", 0.5)), "", "cannot be read as a mesh (PLY is unexpected length"),
-    (_file("junk.glb", b"glTF" + bytes(range(256)) * 4), "", "cannot be read as a mesh"),
-    (_file("index.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 9\n"), "", "cannot be read as a mesh"),
-    (_file("index.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n1 1 0\n3 0 1 5\n"), "", "cannot be read as a mesh"),
+    (_file("half.ply", _cut("ply", 0.5)), "", "trimesh cannot read it as a PLY file (damaged, or not of that "
+                                              "format: its reader raised ValueError: PLY is unexpected length"),
+    (_file("noy.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n2\n3\n"), "",
+     "trimesh cannot read it as a PLY file (damaged, or not of that format: its reader raised KeyError: no 'y' in "
+     "the file's declarations)"),
+    (_file("junk.glb", b"glTF" + bytes(range(256)) * 4), "", "trimesh cannot read it as a GLB file"),
+    (_file("index.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 9\n"), "", "trimesh cannot read it as a OBJ file"),
+    (_file("index.off", "OFF\n3 1 0\n0 0 0\n1 0 0\n1 1 0\n3 0 1 5\n"), "", "trimesh cannot read it as a OFF file"),
     (_file("third.stl", _cut("stl", 1 / 3)), "", "holds no triangles"),
     (_file("empty.obj", ""), "", "holds no triangles"),
     (_file("points.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\n"), "", "holds no triangles"),
-    (lambda directory: str(directory), "", "no such file"),  # a directory
+    (lambda directory: str(directory), "", "is a directory, not a file"),
     (_file("walled.ply", lambda: trimesh.Trimesh(*walled(), process=False).export(file_type="ply")),
      "period = 0.5", ""),  # two periods wide: its copies a period apart do not join
 ]
 
 
 @pytest.mark.parametrize("make, extra, what", BAD_MESHES,
-                         ids=["corrupt-ply", "junk-glb", "obj-index", "off-index", "cut-stl", "empty-obj",
+                         ids=["corrupt-ply", "ply-without-y", "junk-glb", "obj-index", "off-index", "cut-stl",
+                              "empty-obj",
                               "no-faces-obj", "directory", "period-too-small"])
 def test_an_unreadable_empty_or_non_periodic_mesh_is_refused_in_one_line(make, extra, what, tmp_path,
                                                                          tmp_path_factory, capsys):
@@ -269,13 +274,14 @@ BAD_HEIGHTS = [
     (_file("bool.npy", np.zeros((8, 8), bool)), "an array of shape (8, 8) and type bool"),
     (_file("cube.npy", np.zeros((4, 4, 4))), "an array of shape (4, 4, 4)"),
     (_file("objects.npy", np.array([[None, 1], [2, 3]], dtype=object)), "cannot be read as a height array"),
-    (_file("empty.npz", lambda: b""), "cannot be read as a height array"),
-    (lambda directory: str(directory), "no such file"),
+    (_file("empty.npz", lambda: b""), "not a NumPy file (a .npy starts with b'\\x93NUMPY'"),
+    (_file("text.npy", "1 2\n3 4\n"), "not a NumPy file"),
+    (lambda directory: str(directory), "is a directory, not a file"),
 ]
 
 
 @pytest.mark.parametrize("make, what", BAD_HEIGHTS,
-                         ids=["inf", "one-sample", "bool", "3-d", "objects", "empty-file", "directory"])
+                         ids=["inf", "one-sample", "bool", "3-d", "objects", "empty-file", "text-file", "directory"])
 def test_an_unreadable_or_unfit_height_array_is_refused_in_one_line(make, what, tmp_path, tmp_path_factory, capsys):
     path = make(tmp_path_factory.mktemp("heights"))
     assert_run_refused(f'[scene]\nkind = "heightfield"\npath = "{path}"\n' + SMALL_RUN,

@@ -189,6 +189,47 @@ def test_bad_renders_are_refused_in_one_line_and_write_nothing(spheres, tmp_path
     assert sorted(tmp_path.iterdir()) == before and taken.read_bytes() == b"keep me"
 
 
+def test_no_render_writes_over_its_inputs_or_into_an_unwritable_folder(spheres, tmp_path, capsys):
+    """--out the table, or the mesh rendered, is refused with --force or not (each the only copy of
+    what the render reads); a folder nothing can write in (/sys, even for root), a suffix of no
+    picture format: one line before anything is rendered."""
+    table = tmp_path / "own.h5"
+    table.write_bytes(spheres.read_bytes())
+    mesh = tmp_path / "bunny.obj"
+    mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    before = {path: path.read_bytes() for path in (table, mesh)}
+    cases = [(["--out", str(table), "--force"], ("--out", "the table", "another name")),
+             (["--out", str(mesh), "--mesh", str(mesh), "--force"], ("--out", "the mesh", "another name")),
+             (["--out", "/sys/render.png"], ("--out", "/sys", "not writable")),
+             (["--out", str(tmp_path / "r.bmp")], ("--out", "suffix", ".png", ".jpg"))]
+    for flags, words in cases:
+        assert main(["render", str(table), *flags]) == 2
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert len(lines) == 1 and all(w in lines[0] for w in words), lines
+    assert {path: path.read_bytes() for path in (table, mesh)} == before and len(list(tmp_path.iterdir())) == 2
+
+
+def test_a_model_that_raises_while_rendered_is_named_with_its_error(spheres, tmp_path, capsys):
+    """Mitsuba reports an exception of a Python BSDF only as "(see above)": the render says the
+    model's own, in one line, and writes nothing."""
+    (tmp_path / "boom.py").write_text("def Boom(wi, wo):\n    raise ValueError('no value at these directions')\n")
+    out = tmp_path / "r.png"
+    assert main(["render", str(spheres), "--model", f"{tmp_path / 'boom.py'}:Boom", "--out", str(out), "--size", "16",
+                 "--spp", "1"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines == [f"microsim: error: --model {tmp_path / 'boom.py'}:Boom: evaluating it raised ValueError: no value "
+                     "at these directions"], lines
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("suffix, magic", [(".png", b"\x89PNG"), (".jpg", b"\xff\xd8\xff"), (".jpeg", b"\xff\xd8\xff"),
+                                           (".pdf", b"%PDF"), (".svg", b"<?xml")])
+def test_a_render_is_written_in_the_format_of_its_suffix(suffix, magic, tmp_path):
+    images = {light: {"table": np.ones((8, 8))} for light in render.LIGHTS}
+    out = render.figure(images, tmp_path / f"r{suffix}", ("table", "model"))
+    assert out.read_bytes().startswith(magic) and [p.name for p in tmp_path.iterdir()] == [f"r{suffix}"]
+
+
 SCALAR_CHECK = """
 import sys, numpy as np, mitsuba as mi
 mi.set_variant("scalar_rgb")

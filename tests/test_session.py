@@ -128,6 +128,6 @@ def test_a_dictionary_needs_out_and_a_table_is_not_overwritten_unasked(tmp_path)
         session.run(tomllib.loads(SPHERES))
     table = tmp_path / "t.h5"
     table.write_bytes(b"kept")
-    with pytest.raises(session.RunRefused, match="exists; pass --force"):
+    with pytest.raises(session.RunRefused, match=r"exists \(pass --force"):
         session.run(tomllib.loads(SPHERES), table)
     assert table.read_bytes() == b"kept"

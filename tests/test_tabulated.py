@@ -245,23 +245,68 @@ def test_a_table_of_too_few_incidences_is_refused_in_one_line(full, tmp_path, ca
         and "illumination.incidences" in err[0], err
 
 
-@pytest.mark.parametrize("value, words", [("missing.h5", "no such file"), ("config.toml", "not a microsim table")])
+@pytest.mark.parametrize("value, words", [("missing.h5", "no such file"), ("config.toml", "not a microsim table"),
+                                          ("tables", "is a directory, not a file")])
 def test_a_missing_or_foreign_file_is_refused_in_one_line(full, tmp_path, capsys, value, words):
     (tmp_path / "config.toml").write_text("[scene]\n")
+    (tmp_path / "tables").mkdir()
     assert main(["compare", str(full.path), "--model", "table", "--param", f"path={tmp_path / value}"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and words in err[0] and "path" in err[0], err
 
 
-def test_incidences_are_centres_of_the_sensors_rings_spread_evenly():
+def test_incidences_are_the_rings_that_keep_the_widest_gap_least_then_most_even():
+    """Against every choice of 7 of the 400-cell sensor's 13 rings (the first and the last kept):
+    the chooser's widest gap in cos theta_i is the least of them all, and its sum of squared
+    gaps the least among those of that widest gap."""
+    import itertools
+
     cfg = config.validate({**SPHERES, "illumination": {"incidences": 7}, "run": {"paths": 1000}})
     centres = np.degrees(Sensor.build(400).ring_centres())
     assert Sensor.build(400).n_rings == 13
-    np.testing.assert_array_equal(cfg.illumination.theta_i_deg, centres[[0, 2, 4, 6, 8, 10, 12]])
+    chosen = np.cos(np.radians(cfg.illumination.theta_i_deg))
+    assert set(cfg.illumination.theta_i_deg) <= set(centres) and cfg.illumination.theta_i_deg[0] == 0.0
+
+    def gaps(cosines):
+        return -np.diff(np.concatenate([[1.0], cosines, [0.0]]))
+
+    choices = [np.cos(np.radians(centres[[0, *middle, 12]])) for middle in itertools.combinations(range(1, 12), 5)]
+    least = min(gaps(c).max() for c in choices)
+    assert gaps(chosen).max() == pytest.approx(least, rel=1e-12)
+    evenest = min(np.sum(gaps(c) ** 2) for c in choices if gaps(c).max() <= least * (1 + 1e-12))
+    assert np.sum(gaps(chosen) ** 2) == pytest.approx(evenest, rel=1e-12)
     assert cfg.illumination.phi_i_deg == [0.0] * 7
     tilted = config.validate({**SPHERES, "illumination": {"incidences": 7, "azimuths": 4}, "run": {"paths": 1000}})
     assert len(tilted.illumination.theta_i_deg) == 1 + 6 * 4
     assert sorted(set(tilted.illumination.phi_i_deg)) == [0.0, 90.0, 180.0, 270.0]
+
+
+@pytest.mark.parametrize("cells", [100, 400, 1600, 3240])
+def test_every_full_brdf_run_accepted_is_a_full_brdf_to_its_readers(cells):
+    """What the run accepts (illumination.incidences = N) is what TabulatedBRDF, export and render
+    accept (no gap wider than MAX_COS_GAP), and what it refuses they would refuse: the least N it
+    accepts is the least whose rings can keep the gaps within it. (7 incidences at 3240 cells,
+    chosen evenly in rings, left 0.261 and were refused by every reader after the run.)"""
+    rings = Sensor.build(cells).n_rings
+    accepted = []
+    for n in range(2, rings + 1):
+        try:
+            thetas = full_brdf.polar_angles_deg(n, cells)
+        except ValueError as err:
+            assert "illumination.incidences" in str(err) and "accepted" in str(err)
+            continue
+        accepted.append(n)
+        assert full_brdf.widest_gap(np.cos(np.radians(thetas)))[0] <= MAX_COS_GAP, (n, thetas)
+    assert accepted == list(range(accepted[0], rings + 1))
+    if accepted[0] > 2:  # one fewer cannot: every choice of that many rings leaves a wider gap
+        import itertools
+
+        centres = np.cos(Sensor.build(cells).ring_centres())
+        k = accepted[0] - 1
+        widest = min(full_brdf.widest_gap(centres[[0, *middle, rings - 1]])[0]
+                     for middle in itertools.combinations(range(1, rings - 1), k - 2))
+        assert widest > MAX_COS_GAP
+    assert cells != 3240 or 7 in accepted
 
 
 def test_an_anisotropic_table_is_read_on_its_grid_of_polar_angles_and_azimuths(tmp_path):
@@ -286,6 +331,7 @@ def test_an_anisotropic_table_is_read_on_its_grid_of_polar_angles_and_azimuths(t
     ('incidences = 7\ntheta_i_deg = [30.0]', "illumination.theta_i_deg", ("incidences",)),
     ('theta_i_deg = [30.0]\nazimuths = 4', "illumination.azimuths", ("only with illumination.incidences",)),
     ('incidences = 1', "illumination.incidences", ("2",)),
+    ('incidences = 4', "illumination.incidences", ("gap of 0.361", "sensor.cells = 400", "6 to 13")),
 ])
 def test_a_full_brdf_config_that_cannot_be_traced_is_refused(tmp_path, capsys, illumination, key, words):
     text = small_config('kind = "plane"').replace("theta_i_deg = [30.0]", illumination).replace("cells = 100",

@@ -101,6 +101,8 @@ def test_a_user_model_from_the_command_line(plane, tmp_path, monkeypatch, capsys
     ("{dir}/user_brdfs.py:np", "--model {dir}/user_brdfs.py:np: <module 'numpy'"),
     ("{dir}/user_brdfs.py:broken", "--model {dir}/user_brdfs.py:broken: evaluating it raised KeyError: 'no such key'"),
     ("nonsense", "--model: unknown model 'nonsense'; accepted: "),
+    ("my_brdfs.py", "--model my_brdfs.py: a model of your own is named path.py:Name, Name the class or function"),
+    ("{dir}:Diffuse", "--model {dir}:Diffuse: {dir}: is a directory, not a file"),
 ])
 def test_a_user_model_that_cannot_be_used_is_refused_in_one_line(plane, tmp_path, capsys, spec, message):
     (tmp_path / "user_brdfs.py").write_text(MODEL_FILE)

@@ -95,12 +95,18 @@ class Points(Estimator):
 
     @classmethod
     def wanted(cls, config) -> bool:
-        return config.sensor.n_points > 0
+        """Every run: its hooks are compiled into every tracer, so that a run with points takes
+        the kernel a run without them compiled (numba specializes the kernels on the estimators'
+        records, and a second kernel cost as long a compile as the first). Without points they
+        loop over none, draw no random number, estimate nothing and write nothing."""
+        return True
 
     def shapes(self):
         return ((ORDERS, self.sensor.n_points),)
 
     def reduce(self, fields, paths, incidence):
+        if not self.sensor.n_points:
+            return {}
         per_path = fields.weight / paths
         rows = np.vstack([per_path, per_path.sum(axis=0)])
         return {"brdf_points": rows / self.directions[incidence][:, 2]}
@@ -119,6 +125,8 @@ class Points(Estimator):
                 for i in range(plan.n_incidences)]
 
     def write(self, put, estimates):
+        if not self.sensor.n_points:
+            return
         plan = self.plan
         angles = [self.sensor.point_angles(plan.incidence_direction(i), plan.phi_i[i])
                   for i in range(plan.n_incidences)]
@@ -132,6 +140,8 @@ class Points(Estimator):
             put(f"brdf_points{suffix}_covariance", np.stack([e.covariance[row] for e in estimates["brdf_points"]]))
 
     def attributes(self) -> dict:
+        if not self.sensor.n_points:
+            return {}
         config = self.plan.config
         parts = [f"{name} ({m.kind}): {m.delta_lobes}" for name, m in (("material", config.material),
                                                                        ("base", config.base))

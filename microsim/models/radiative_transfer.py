@@ -28,15 +28,17 @@ import numpy as np
 
 from .base import BRDFModel, Param, register
 from .hfunctions import ISOTROPIC_MODE, HFunction
-from ..physics.phase import phase_lambert_sphere
 
 
-def single_scattering(wi, wo, albedo, phase=phase_lambert_sphere) -> np.ndarray:
+def single_scattering(wi, wo, albedo, phase=None) -> np.ndarray:
     """f1 = c p(-wi.wo) / (mu_i + mu_o), Eq. 10, in 1/sr, for directions (..., 3) that broadcast.
 
-    ``phase`` is p(mu) in 1/sr, integrating to 1 over the sphere; the default is the exact
-    Lambert-sphere phase function (Eq. 1).
+    ``phase`` is p(mu) in 1/sr, integrating to 1 over the sphere; the default (None) is the exact
+    Lambert-sphere phase function (Eq. 1), imported here as it is first needed: its numba ufuncs
+    take a tenth of a second to load, which listing the models need not pay.
     """
+    if phase is None:
+        from ..physics.phase import phase_lambert_sphere as phase
     return albedo * phase(-np.sum(wi * wo, axis=-1)) / (wi[..., 2] + wo[..., 2])
 
 

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..files import not_a_file
 from .base import BRDFModel, Param, get
 
 
@@ -104,6 +105,9 @@ def load(text: str) -> type[BRDFModel]:
     importable from the current directory or the installed packages) or ``path.py:Name`` (a
     file); UserModelError (one line) if it cannot be loaded."""
     where, colon, attribute = text.rpartition(":")
+    if not colon and (text.endswith(".py") or "/" in text):
+        raise UserModelError(f"a model of your own is named path.py:Name, Name the class or function in the file "
+                             f"to use (e.g. {text}:MyModel)")
     if not colon:
         return get(text)
     if not where or not attribute.isidentifier():
@@ -129,8 +133,8 @@ def _import(name: str):
 
 
 def _load_file(path: Path):
-    if not path.is_file():
-        raise UserModelError(f"{path}: no such file")
+    if why := not_a_file(path):
+        raise UserModelError(f"{path}: {why}")
     name = f"microsim_user_model_{abs(hash(str(path.resolve())))}"
     spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)

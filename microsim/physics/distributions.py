@@ -205,7 +205,7 @@ def gaf_value(gaf_code, lambda_i, lambda_o, wi_z, wo_z, m_z, wi_m, wo_m):
     return min(1.0, 2.0 * m_z * wi_z / wi_m, 2.0 * m_z * wo_z / wo_m)
 
 
-@numba.vectorize(["float64(int64, float64, float64, float64, float64, float64, float64, float64)"], cache=True)
+@numba.vectorize(cache=True)
 def gaf_array(gaf_code, lambda_i, lambda_o, wi_z, wo_z, m_z, wi_m, wo_m):
     """Array form of :func:`gaf_value`."""
     return gaf_value(gaf_code, lambda_i, lambda_o, wi_z, wo_z, m_z, wi_m, wo_m)

@@ -63,19 +63,19 @@ def fresnel(cos_i, eta, k):
     return fresnel_conductor(cos_i, eta, k)
 
 
-@numba.vectorize(["float64(float64, float64)"], cache=True)
+@numba.vectorize(cache=True)
 def fresnel_dielectric_array(cos_i, eta):
     """Array form of :func:`fresnel_dielectric`."""
     return fresnel_dielectric(cos_i, eta)
 
 
-@numba.vectorize(["float64(float64, float64, float64)"], cache=True)
+@numba.vectorize(cache=True)
 def fresnel_conductor_array(cos_i, eta, k):
     """Array form of :func:`fresnel_conductor`."""
     return fresnel_conductor(cos_i, eta, k)
 
 
-@numba.vectorize(["float64(float64, float64, float64)"], cache=True)
+@numba.vectorize(cache=True)
 def fresnel_array(cos_i, eta, k):
     """Array form of :func:`fresnel`."""
     return fresnel(cos_i, eta, k)

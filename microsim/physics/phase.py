@@ -27,7 +27,7 @@ def phase_lambert_sphere(mu):
     return 2.0 * (math.sqrt(1.0 - m * m) - m * math.acos(m)) / (3.0 * math.pi * math.pi)
 
 
-@numba.vectorize(["float64(float64)"], cache=True)
+@numba.vectorize(cache=True)
 def phase_lambert_sphere_cdf(mu):
     """P(cosine <= mu) = 2 pi int_-1^mu p, from the antiderivative of Eq. 1."""
     m = min(max(mu, -1.0), 1.0)
@@ -55,7 +55,7 @@ def sample_phase_exact(xi1, xi2, xi3):
     return math.sqrt((1.0 - xi1) * (1.0 - xi2)) * math.sin(2.0 * math.pi * xi3) - math.sqrt(xi1 * xi2)
 
 
-@numba.vectorize(["float64(float64)"], cache=True)
+@numba.vectorize(cache=True)
 def sample_phase_approx(xi):
     """Scattering cosine from one uniform in [0, 1) by the approximate inverse CDF, Eq. 6 (|error| < 5e-4)."""
     return 1.0 - 2.0 * (1.0 - xi ** (0.0401885 * xi + 1.01938)) ** 0.397225
