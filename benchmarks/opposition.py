@@ -13,7 +13,10 @@ Per ring, the enhancement over point scatterers E = f / f_RT - 1, f_RT = c p(-wi
 mu_o) averaged over the ring (radiative transfer has no peak); beside it, the same from the
 finite-size model ``boolean_spheres_single`` (first order in r / l; microsim/models/boolean_spheres.py;
 phi <= 0.1) and chi^2 per ring of the table against it. Peak height: E(ring 0) - E(outer OUTER_RINGS
-rings); half width at half height, interpolated, measured and modelled.
+rings); half width at half height, interpolated, measured and modelled. At max_order = 1 the
+slab is ln(1e3) free paths deep, which cuts the peak's tip (exact retro, where the way out is
+free once the way in was) by exp(-depth / (mu_i l)), 1e-3 at theta_i = 0; the model integrates to
+infinite depth (docs/validation/benchmarks.md, points.py).
 
     python benchmarks/opposition.py [--phis ...] [--paths N] [--json]
 
