@@ -31,7 +31,6 @@ Writes benchmarks/out/smith_gaussian.json and the chart, and copies both to docs
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import shutil
@@ -49,8 +48,8 @@ from report import OUT, save_figures
 
 ALPHAS = (0.3, 0.5, 0.8, 1.0)
 THETAS = (0.0, 30.0, 45.0, 60.0, 75.0)
-#: the period, correlation lengths: the realizations' spread of the order-1 albedo (a rougher
-#: realization reflects less at once) falls as 1 / TILE, and it, not the paths, sets the errors
+#: the period, correlation lengths: the spread of the order-1 albedo between realizations, which
+#: sets the errors more than the paths do, falls as 1 / TILE
 TILE = 48.0
 #: realizations and paths an incidence (over all realizations) by alpha: every albedo difference
 #: at more than 5 standard errors (the smallest, alpha 1 at normal incidence, takes the most)
