@@ -15,9 +15,10 @@ import argparse
 import time
 
 import numpy as np
-
-from microsim import config, runner
 from report import save_figures
+
+from microsim import config
+from microsim.run import runner
 
 ALBEDOS = [0.3, 0.6, 0.9, 0.99]
 SCENES = {"medium": {"kind": "halfspace_medium", "phase": "lambert_sphere"},

@@ -101,7 +101,7 @@ def write_tables(source: Path, job_args: dict[str, list[str]], out_dir: Path, fl
     env = dict(os.environ, PYTHONPATH=str(source))
     for name, args in job_args.items():
         table = out_dir / (name.replace("/", "_") + ".h5")
-        command = [sys.executable, "-m", "microsim.cli", "run", *args, *flags, "--out", str(table), "--force"]
+        command = [sys.executable, "-m", "microsim", "run", *args, *flags, "--out", str(table), "--force"]
         done = subprocess.run(command, cwd=source, env=env, capture_output=True, text=True)
         if done.returncode != 0:
             raise SystemExit(f"{source}: {name} failed: {done.stderr.strip()}")

@@ -64,7 +64,7 @@ def emulation(isa: str, directory: Path) -> dict:
     if isa == "native":
         return dict(os.environ)
 
-    from microsim import embree
+    from microsim.tracer import embree
 
     cpu, keep, numpy_off = LEVELS[isa]
     host = llvm.get_host_cpu_features()

@@ -29,10 +29,11 @@ import numba
 import numpy as np
 
 from microsim import config as config_module
-from microsim import models, runner
-from microsim.physics.boolean_model import free_path, number_density, radius_over_free_path
+from microsim import models
 from microsim.models.radiative_transfer import single_scattering
-from microsim.sensor import Sensor, cell_index
+from microsim.physics.boolean_model import free_path, number_density, radius_over_free_path
+from microsim.run import runner
+from microsim.tracer.sensor import Sensor, cell_index
 
 OUT = Path(__file__).resolve().parent / "out"
 ALBEDO = 0.9

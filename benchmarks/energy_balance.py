@@ -13,8 +13,10 @@ import argparse
 import time
 from pathlib import Path
 
-from microsim import config, runner
 from report import save_figures
+
+from microsim import config
+from microsim.run import runner
 
 ROOT = Path(__file__).resolve().parent.parent
 

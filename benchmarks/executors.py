@@ -33,7 +33,7 @@ WAYS = {"process pool": ["--workers", "2"], "dask": ["--executor", "dask", "--wo
 
 def timed_run(config: str, paths: int, flags: list[str], out: Path) -> float:
     start = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "microsim.cli", "run", config, "--paths", str(paths), "--out", str(out),
+    subprocess.run([sys.executable, "-m", "microsim", "run", config, "--paths", str(paths), "--out", str(out),
                     "--force", *flags], check=True, capture_output=True, cwd=ROOT)
     return time.perf_counter() - start
 

@@ -5,7 +5,7 @@ Surfaces: scene heightfield, generator = "gaussian" (geometry/gaussian_surface.p
 alpha in ALPHAS (facets' slope variance alpha^2 / 2 an axis), correlation length 1, the default
 grid (8 samples a correlation length) and tile; conductor facets (eta + ik = 0.2 + 3.9i, as
 runs/vcavities_conductor.toml), theta_i in THETAS, 900 cells, all orders, statistics = true
-(every realization's NDF, visible NDF and G1: microsim/surface_statistics.py).
+(every realization's NDF, visible NDF and G1: geometry/surface_statistics.py).
 
 What is charted (benchmarks/out/gaussian_surfaces.png, .json):
 
@@ -18,7 +18,7 @@ What is charted (benchmarks/out/gaussian_surfaces.png, .json):
     (Beckmann at the measured alpha, which (a) shows is the D of the facets) and three G:
     Smith's separable G1(i) G1(o), Smith's height-correlated G2 (both from Beckmann's Lambda)
     and the V-cavity (Torrance-Sparrow) G; chi-square per cell and median |rel| per alpha and
-    theta_i (``microsim.compare``: cells with signal, the cell's predicted variance).
+    theta_i (``microsim.analysis.compare``: cells with signal, the cell's predicted variance).
 (c) Masking: the measured G1(wo, m) = D_wo(m) cos(theta_o) / (<wo.m> D(m)) of facets of normal m
     in the plane of wo, at theta_o = 75 and 85 deg, against Smith's 1 / (1 + Lambda(wo)) (the
     same for every m) and the V-cavity min(1, 2 (n.m)(n.wo) / (wo.m)); and the chi-square per
@@ -45,14 +45,15 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from report import OUT, save_figures
 
-import geometry
-from microsim import compare, config, session, tables
-from microsim.frames import direction
+from microsim import config, geometry, tables
+from microsim.analysis import compare
+from microsim.app import session
+from microsim.core.frames import direction
 from microsim.physics import distributions as nd
 from microsim.physics.rng import geometry_rng
-from microsim.sensor import Sensor
-from report import OUT, save_figures
+from microsim.tracer.sensor import Sensor
 
 ALPHAS = (0.1, 0.3, 0.5, 0.8, 1.0)
 THETAS = (0.0, 30.0, 60.0, 75.0, 85.0)

@@ -5,7 +5,7 @@ measure").
 The surface of runs/gaussian_alpha08_lambert.toml (alpha 0.8, its default tile: 228^2 samples,
 about 104 000 triangles; --run picks another heightfield run), its first realization, laid twice:
 ``intersector = "triangles"`` (Embree, the direct backend) and ``"grid"``
-(microsim/integrators/grid.py). At each incidence, single-threaded, best of --repeats:
+(microsim/tracer/integrators/grid.py). At each incidence, single-threaded, best of --repeats:
 
 1. the tracer: --paths paths on each, ns a segment (the same paths: the same random streams);
 2. the queries alone: every query the direct backend made to Embree (origin, direction, tfar),
@@ -36,13 +36,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from report import save_figures  # noqa: E402
 from throughput import fused_trace, load, realization, replay, replay_direct  # noqa: E402
 
-from microsim import runner  # noqa: E402
-from microsim.estimators import DEFAULT, build  # noqa: E402
-from microsim.integrators.grid import GridBackend, walk  # noqa: E402
-from microsim.integrators.records import Beam  # noqa: E402
+from microsim.core.tally import SEGMENTS  # noqa: E402
 from microsim.physics.rng import stream_key  # noqa: E402
-from microsim.sensor import Sensor  # noqa: E402
-from microsim.tally import SEGMENTS  # noqa: E402
+from microsim.run import runner  # noqa: E402
+from microsim.tracer.estimators import DEFAULT, build  # noqa: E402
+from microsim.tracer.integrators.grid import GridBackend, walk  # noqa: E402
+from microsim.tracer.integrators.records import Beam  # noqa: E402
+from microsim.tracer.sensor import Sensor  # noqa: E402
 
 
 @numba.njit(cache=True)

@@ -11,8 +11,9 @@ import json
 import sys
 import time
 
-from microsim import config, runner
+from microsim import config
 from microsim.physics.rng import geometry_rng, stream_key
+from microsim.run import runner
 
 CASES = {
     "medium": ({"scene": {"kind": "halfspace_medium"}, "material": {"kind": "lambert", "albedo": 0.9}}, 400_000),

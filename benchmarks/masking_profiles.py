@@ -28,9 +28,8 @@ import argparse
 import math
 
 import numpy as np
-from scipy.special import erf
-
 from report import save_figures
+from scipy.special import erf
 
 
 def smith_g1(alpha: float, theta: float) -> float:

@@ -3,7 +3,7 @@ Lambert-sphere scatterers (issue 12, item b), every albedo from one run.
 
 One run of ``halfspace_medium`` (phase ``lambert_sphere``) at albedos 0.3, 0.6, 0.9, 0.99
 (docs/conventions.md §4: traced once at 0.99), theta_i = 0, 30, 60, 80 deg, 3240 cells, --paths per
-incidence, 32 realizations; then, per albedo and incidence, ``microsim.compare`` of
+incidence, 32 realizations; then, per albedo and incidence, ``microsim.analysis.compare`` of
 ``lambert_sphere`` (method exact: exact single scattering and the exact Horak-Chandrasekhar
 solution of the three-term phase function; method fit: the paper's fits) and
 ``lambert_sphere_fast`` (Eq. 41): chi^2 per cell, median |rel| over the cells with signal, and the
@@ -26,8 +26,11 @@ from __future__ import annotations
 
 import argparse
 
-from microsim import compare, config, models, runner, tables
 from report import OUT, save_figures
+
+from microsim import config, models, tables
+from microsim.analysis import compare
+from microsim.run import runner
 
 ALBEDOS = [0.3, 0.6, 0.9, 0.99]
 THETA_I = [0.0, 30.0, 60.0, 80.0]

@@ -35,7 +35,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from microsim import config as config_module  # noqa: E402
-from microsim import runner, tables  # noqa: E402
+from microsim import tables
+from microsim.run import runner  # noqa: E402
 
 MACHINE = 24 * 2**30
 CONFIG = """[scene]
@@ -70,7 +71,7 @@ print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)
 def measure(config: Path, flags: list[str], out: Path) -> dict:
     """Peak RSS of the largest process (exact: ru_maxrss of every waited-for descendant, from a
     wrapper) and peak PSS of the whole tree (sampled), in bytes."""
-    process = psutil.Popen([sys.executable, "-c", WRAPPER, sys.executable, "-m", "microsim.cli", "run", str(config),
+    process = psutil.Popen([sys.executable, "-c", WRAPPER, sys.executable, "-m", "microsim", "run", str(config),
                             "--out", str(out), "--force", *flags], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                            cwd=ROOT)
     total = 0

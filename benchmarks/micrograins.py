@@ -11,7 +11,7 @@ correlated | uncorrelated). Every run is one worker process of one thread
     86 deg, phi_i = 0, single scattering (max_order = 1), one row per (tau0, beta_x, beta_y):
     polar maps of the simulated order-1 BRDF, the correlated model (Eq. 18), the uncorrelated
     one (Eq. 17) and their relative errors; cells where the table has no signal (value <= 3
-    standard errors, :mod:`microsim.compare`) are grey on the simulation and error maps. Printed
+    standard errors, :mod:`microsim.analysis.compare`) are grey on the simulation and error maps. Printed
     per setting and model: chi-square per cell, median |rel| (over the cells with signal), the
     order-1 albedos, and the retro region (the cell holding the retro direction wo = wi, and the
     projected-solid-angle weighted mean over the cells within RETRO_DEG of it).
@@ -62,9 +62,10 @@ from pathlib import Path
 
 import numpy as np
 
-from microsim import compare as compare_module
 from microsim import config as config_module
-from microsim import models, runner, tables
+from microsim import models, tables
+from microsim.analysis import compare as compare_module
+from microsim.run import runner
 
 OUT = Path(__file__).resolve().parent / "out"
 
@@ -203,7 +204,7 @@ def chart_a(rows) -> Path:
     plt = _pyplot()
     from matplotlib import colors
 
-    from microsim.plots import polar_cells
+    from microsim.analysis.plots import polar_cells
 
     columns = ("simulation (order 1)", "correlated (Eq. 18)", "uncorrelated (Eq. 17)",
                "(correlated - sim) / sim", "(uncorrelated - sim) / sim")
@@ -367,7 +368,7 @@ def versus_exact(table, exact) -> float:
 
 
 def part_c(workdir: Path, scale: float, realizations: int) -> dict:
-    from geometry.micrograins import default_tile
+    from microsim.geometry.micrograins import default_tile
     from microsim.physics.boolean_model import grain_density
 
     paths = max(realizations, int(CONV_PATHS * scale))

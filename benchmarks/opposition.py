@@ -30,12 +30,13 @@ import math
 import time
 
 import numpy as np
-
-from microsim import config, models, runner
-from microsim.physics.boolean_model import radius_over_free_path
-from microsim.orders import RESULT_ALL_ORDERS
-from microsim.models.radiative_transfer import single_scattering
 from report import OUT, save_figures
+
+from microsim import config, models
+from microsim.core.orders import RESULT_ALL_ORDERS
+from microsim.models.radiative_transfer import single_scattering
+from microsim.physics.boolean_model import radius_over_free_path
+from microsim.run import runner
 
 PHIS = [0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.3, 0.45, 0.6]
 THETA_I_DEG = [0.0, 30.0]

@@ -1,4 +1,4 @@
-"""Next-event estimation at exact directions (microsim.estimators.points) against binning in
+"""Next-event estimation at exact directions (microsim.tracer.estimators.points) against binning in
 cells: what the points resolve, what they gain per second, and what they cost per path.
 
 (a) The opposition peak of Boolean Lambertian spheres (albedo and rings of opposition.py: 0.9,
@@ -71,14 +71,17 @@ import time
 from pathlib import Path
 
 import numpy as np
+from opposition import ALBEDO as PEAK_ALBEDO
+from opposition import MODEL_MAX_PHI, RINGS, ring_reach_deg
+from report import OUT, save_figures
 from scipy.optimize import brentq
 
-from microsim import config, models, runner, session, tables
-from microsim.orders import ORDERS
+from microsim import config, models, tables
+from microsim.app import session
+from microsim.core.orders import ORDERS
 from microsim.physics.boolean_model import radius_over_free_path
-from microsim.sensor import Sensor
-from opposition import ALBEDO as PEAK_ALBEDO, MODEL_MAX_PHI, RINGS, ring_reach_deg
-from report import OUT, save_figures
+from microsim.run import runner
+from microsim.tracer.sensor import Sensor
 
 THETA_I_DEG = 30.0
 PEAK_PHIS = [0.005, 0.02, 0.1, 0.3]

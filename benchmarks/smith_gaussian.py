@@ -7,7 +7,7 @@ of TILE correlation lengths (above the tile's bias floor, 6 sigma tan(theta_i), 
 and theta_i 75 deg: docs/developer/performance.md; longer than the default to shrink the
 realizations' spread), mirror facets (F = 1), theta_i in THETAS,
 max_order = 1 (the paths end at their second hit: order 1 is all that is tallied), with
-statistics = true (every realization's G1 by facet normal, microsim/surface_statistics.py).
+statistics = true (every realization's G1 by facet normal, geometry/surface_statistics.py).
 
 (a) The order-1 albedo against the integral over the hemisphere of the microfacet BRDF with
     Beckmann's D at the requested alpha (the generator's facets have exactly its slope
@@ -39,12 +39,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+from report import OUT, save_figures
 
-from microsim import session, tables
-from microsim.frames import direction
+from microsim import tables
+from microsim.app import session
+from microsim.core.frames import direction
 from microsim.models.quadrature import directional_albedo
 from microsim.physics import distributions as nd
-from report import OUT, save_figures
 
 ALPHAS = (0.3, 0.5, 0.8, 1.0)
 THETAS = (0.0, 30.0, 45.0, 60.0, 75.0)

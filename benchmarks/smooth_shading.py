@@ -37,7 +37,8 @@ from matching_cells import RECIPROCITY_CELLS, reciprocity_z, ring_incidences  # 
 from report import save_figures  # noqa: E402
 from test_periodic_tile_physics import ridges  # noqa: E402
 
-from microsim import config, runner, tables  # noqa: E402
+from microsim import config, tables
+from microsim.run import runner  # noqa: E402
 
 INCIDENCES = [0.0, 60.0, 85.0]
 MATERIALS = {"mirror": {"kind": "mirror"}, "lambert": {"kind": "lambert", "albedo": 0.8}}

@@ -29,11 +29,13 @@ import argparse
 import time
 
 import numpy as np
-
-from geometry import poisson_spheres
-from microsim import compare, config, runner
-from microsim.orders import RESULT_ALL_ORDERS
 from report import OUT, save_figures
+
+from microsim import config
+from microsim.analysis import compare
+from microsim.core.orders import RESULT_ALL_ORDERS
+from microsim.geometry import poisson_spheres
+from microsim.run import runner
 
 THETA_I_DEG = [0.0, 60.0, 85.0]
 #: realizations of the reference run: its geometric spread is then small beside every variant's

@@ -28,13 +28,13 @@ import math
 import time
 
 import numpy as np
-
-from geometry import poisson_spheres
-from microsim import config as config_module
-from microsim import runner
-from microsim.orders import RESULT_ALL_ORDERS
-from microsim.tally import TRANSMITTED
 from report import OUT, save_figures
+
+from microsim import config as config_module
+from microsim.core.orders import RESULT_ALL_ORDERS
+from microsim.core.tally import TRANSMITTED
+from microsim.geometry import poisson_spheres
+from microsim.run import runner
 
 THETA_I_DEG = [0.0, 60.0, 85.0]
 CELLS = 400

@@ -39,14 +39,16 @@ import time
 from pathlib import Path
 
 import numpy as np
-
-from microsim import compare, config, models, runner, tables
-from microsim.physics.boolean_model import radius_over_free_path
-from microsim.fit import fit
-from microsim.models.radiative_transfer import single_scattering
-from microsim.sensor import Sensor
 from opposition import half_width
 from report import OUT, save_figures
+
+from microsim import config, models, tables
+from microsim.analysis import compare
+from microsim.analysis.fit import fit
+from microsim.models.radiative_transfer import single_scattering
+from microsim.physics.boolean_model import radius_over_free_path
+from microsim.run import runner
+from microsim.tracer.sensor import Sensor
 
 PHIS = [0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.3, 0.45, 0.6]
 ALBEDOS = [0.3, 0.6, 0.9, 0.99]

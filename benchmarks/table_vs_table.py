@@ -4,7 +4,7 @@ both tables are of one BRDF. Full BRDFs of Boolean spheres (phi = 0.3, 13 incide
 
 The incidences of a table share its realizations' geometry, so their albedo errors are
 correlated (a denser realization brightens every incidence): the bound of the albedos' mean z^2
-takes that correlation (microsim.compare.albedo_bound); with the incidences taken as
+takes that correlation (microsim.analysis.compare.albedo_bound); with the incidences taken as
 independent it was exceeded by two seeds of the same config (shown beside it). Lab notes:
 docs/guide/tabulated.md.
 
@@ -19,8 +19,10 @@ from pathlib import Path
 
 from scipy.stats import chi2
 
-from microsim import compare, config, runner, tables
-from microsim.tabulated import TabulatedBRDF
+from microsim import config, tables
+from microsim.analysis import compare
+from microsim.models.tabulated import TabulatedBRDF
+from microsim.run import runner
 
 CONFIG = {
     "scene": {"kind": "poisson_spheres", "volume_fraction": 0.3},

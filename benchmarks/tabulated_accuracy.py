@@ -1,8 +1,8 @@
-"""How far the tabulated BRDF (microsim.tabulated) lies from the BRDF it tabulates: the
+"""How far the tabulated BRDF (microsim.models.tabulated) lies from the BRDF it tabulates: the
 interpolation alone, without noise.
 
 An analytic model's exact cell averages at the incidences of a full-BRDF run
-(``illumination.incidences = N``, microsim.full_brdf) are tabulated as a table's would be; the
+(``illumination.incidences = N``, microsim.config.full_brdf) are tabulated as a table's would be; the
 tabulated BRDF's own cell averages (a fixed 16 x 16 Gauss rule a cell) are then compared with the
 model's at the table's incidences and halfway between them (in theta_i), where it interpolates.
 Reported per model, sensor and N: the relative error of the cells, RMS weighted by each cell's
@@ -19,11 +19,12 @@ import time
 
 import numpy as np
 
-from microsim import full_brdf, models
-from microsim.compare import CellRule, cell_averages
-from microsim.frames import direction
-from microsim.sensor import Sensor
-from microsim.tabulated import CellValues, TabulatedBRDF
+from microsim import models
+from microsim.analysis.compare import CellRule, cell_averages
+from microsim.config import full_brdf
+from microsim.core.frames import direction
+from microsim.models.tabulated import CellValues, TabulatedBRDF
+from microsim.tracer.sensor import Sensor
 
 MODELS = {
     "lambert_sphere c=0.8": ("lambert_sphere", {"albedo": 0.8}),

@@ -23,10 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
-import geometry
 from microsim import config as config_module
-from microsim import runner
-from microsim.orders import RESULT_ALL_ORDERS
+from microsim import geometry
+from microsim.core.orders import RESULT_ALL_ORDERS
+from microsim.run import runner
 
 OUT = Path(__file__).resolve().parent / "out"
 EXACT = "exact"

@@ -66,14 +66,14 @@ from pathlib import Path
 import numpy as np
 
 from microsim import config as config_module
-from microsim import runner
-from microsim.estimators import DEFAULT, build
-from microsim.integrators.records import Beam
-from microsim.tally import SEGMENTS
-from microsim.integrators.direct import DirectBackend
-from microsim.integrators.embreex import EmbreexBackend, embree_scene
+from microsim.core.tally import SEGMENTS
 from microsim.physics.rng import geometry_rng, stream_key
-from microsim.sensor import Sensor
+from microsim.run import runner
+from microsim.tracer.estimators import DEFAULT, build
+from microsim.tracer.integrators.direct import DirectBackend
+from microsim.tracer.integrators.embreex import EmbreexBackend, embree_scene
+from microsim.tracer.integrators.records import Beam
+from microsim.tracer.sensor import Sensor
 
 ROOT = Path(__file__).resolve().parent.parent
 SPHERE_RUNS = ("spheres_phi010", "spheres_phi030", "spheres_phi060")

@@ -12,7 +12,7 @@ incidence (theta_i = 45 deg), all orders.
      alone: raw direct rays/s (rtcIntersect1 from numba, as the tracer calls it:
      ``embree.Scene.intersect``) and raw embreex rays/s (embreex's ``run`` on the same canonical
      mesh, in batches of 1 M rays);
-   - the same logged rays through :func:`microsim.integrators.vcavity.meet_analytic` alone (the
+   - the same logged rays through :func:`microsim.tracer.integrators.vcavity.meet_analytic` alone (the
      canonical groove, depth 1): raw analytic rays/s, the cost of the intersection itself;
    - each intersector's segments/s over raw Embree's rays/s on those same rays.
 2. The billion: ``runner.run`` on --workers processes of one thread, --billion-paths paths in 64
@@ -32,17 +32,18 @@ from pathlib import Path
 
 import numba
 import numpy as np
-
-import geometry
-from microsim import config, embree, runner, tables
-from microsim.tally import SEGMENTS
-from microsim.integrators import vcavity
-from microsim.integrators.vcavity import VCavityTracer, meet_analytic
-from microsim.integrators.embreex import embree_scene
-from microsim.plots import incidence_plane_cells
-from microsim.physics.rng import stream_key
-from microsim.sensor import Sensor
 from report import OUT, save_figures
+
+from microsim import config, geometry, tables
+from microsim.analysis.plots import incidence_plane_cells
+from microsim.core.tally import SEGMENTS
+from microsim.physics.rng import stream_key
+from microsim.run import runner
+from microsim.tracer import embree
+from microsim.tracer.integrators import vcavity
+from microsim.tracer.integrators.embreex import embree_scene
+from microsim.tracer.integrators.vcavity import VCavityTracer, meet_analytic
+from microsim.tracer.sensor import Sensor
 
 THETA_I = 45.0
 EMBREEX_BATCH = 1 << 20

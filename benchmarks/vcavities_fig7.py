@@ -12,7 +12,7 @@ Oren-Nayar model stops holding.
 (b) Oren-Nayar against V-cavities with the gaussian distribution of Eq. 13 (the one the paper says
     Oren and Nayar use; roughness = sigma in rad, ``microsim.physics.distributions``), Lambertian
     facets of albedo 0.8, sigma from 0.1 to 1.2 rad, theta_i in {0, 30, 60, 80} deg, 3240 cells,
-    --paths per incidence: ``microsim.compare`` of the cell-averaged model against the table,
+    --paths per incidence: ``microsim.analysis.compare`` of the cell-averaged model against the table,
     median |rel| over the cells with signal (table > 3 standard errors) and the directional
     albedo ratio model / table, for
       - the direct term L1 (``terms = "direct"``) against order 1,
@@ -28,10 +28,12 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-
-from microsim import compare, config, models, runner, tables
-from microsim.plots import incidence_plane_cells, polar_cells
 from report import OUT, save_figures
+
+from microsim import config, models, tables
+from microsim.analysis import compare
+from microsim.analysis.plots import incidence_plane_cells, polar_cells
+from microsim.run import runner
 
 ROOT = Path(__file__).resolve().parent.parent
 MATERIALS = ("lambert", "interfaced_lambert", "conductor")

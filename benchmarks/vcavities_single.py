@@ -18,8 +18,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
 import test_vcavities as cases  # noqa: E402
-from microsim import models, runner  # noqa: E402
 from stat_bounds import chi2_bound, chi2_lower_bound  # noqa: E402
+
+from microsim import models
+from microsim.run import runner  # noqa: E402
 
 
 def report(label, result, model):

@@ -3,7 +3,7 @@ Sphinx roles shown as code in the API reference.
 
 A page holds a marker ``<!-- generated: NAME -->``, which :func:`on_page_markdown` replaces with
 the Markdown of ``GENERATORS[NAME]``: the models from their registry (parameters and ranges as
-``microsim models`` prints them), the table format from :mod:`microsim.table_layout`, the config
+``microsim models`` prints them), the table format from :mod:`microsim.core.table_layout`, the config
 keys from the config schema. The docs can then not drift from the code.
 """
 
@@ -12,7 +12,7 @@ from __future__ import annotations
 import re
 
 MARKER = re.compile(r"<!-- generated: ([a-z_-]+) -->")
-#: a Sphinx cross-reference role of a docstring (``:class:`~microsim.progress.Progress```) as
+#: a Sphinx cross-reference role of a docstring (``:class:`~microsim.app.progress.Progress```) as
 #: mkdocstrings renders it, role and all
 SPHINX_ROLE = re.compile(r":(?:class|func|meth|mod|data|attr|exc|obj):<code>(~?)([^<]+)</code>")
 
@@ -35,7 +35,8 @@ def models_page() -> str:
 
 
 def table_format_page() -> str:
-    from microsim import table_layout, tables
+    from microsim import tables
+    from microsim.core import table_layout
 
     lines = [f"Format version: **{table_layout.FORMAT_VERSION}** (the `format_version` attribute).", "",
              "### Attributes", "", "| attribute | of | meaning | present |", "|---|---|---|---|"]
@@ -53,7 +54,8 @@ def table_format_page() -> str:
 
 
 def config_keys_page() -> str:
-    from microsim import config, sweep
+    from microsim import config
+    from microsim.app import sweep
 
     lines = ["| key | kinds that have it | accepted | default | meaning |", "|---|---|---|---|---|"]
     for key in config.keys() + sweep.keys():

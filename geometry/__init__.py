@@ -1,7 +1,7 @@
 """Generators of random microgeometry, one module per scene kind (docs/conventions.md §5).
 
 A generator module provides ``KIND``; ``INTEGRATOR``, the name of the integrator that traces
-its scenes (a key of ``microsim.integrators.INTEGRATORS``; "surface" for Embree triangles);
+its scenes (a key of ``microsim.tracer.integrators.INTEGRATORS``; "surface" for Embree triangles);
 ``Config``, the pydantic model of its ``[scene]`` table; ``check(config)``, cross-section rules
 (raises ValueError with a one-line message); ``for_backend(config, backend) -> (config, note)``,
 the config as that Embree backend can trace it (the note says what was substituted, "" if
@@ -10,12 +10,12 @@ with its defaults filled in (stored in the table's ``scene/`` attrs); ``scene_by
 about how much memory one realization takes once built for Embree (the runner refuses a run
 that cannot fit); and
 ``generate(resolved, config, rng)``, one random realization in the form its integrator takes
-(for "surface", a ``microsim.scene.Scene`` assembled with ``SceneBuilder``).
+(for "surface", a ``microsim.tracer.scene.Scene`` assembled with ``SceneBuilder``).
 Optionally ``SIZE``, the advice the memory refusal gives on a scene's size
 (default: lower the scene's tile or depth).
 """
 
-from . import halfspace_medium, heightfield, mesh, micrograins, plane, poisson_spheres, vcavities
+from microsim.geometry import halfspace_medium, heightfield, mesh, micrograins, plane, poisson_spheres, vcavities
 
 SCENES = {module.KIND: module for module in (plane, poisson_spheres, micrograins, vcavities, halfspace_medium, mesh,
                                             heightfield)}

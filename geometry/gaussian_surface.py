@@ -10,7 +10,7 @@ covariance is positive, and h = IDFT(sqrt(DFT(C)) DFT(w)) for white noise w).
 Roughness. A continuous surface of this C has slopes h_x, h_y Gaussian with variances
 2 sigma^2 / lx^2 and 2 sigma^2 / ly^2: Beckmann's distribution of roughness alpha_x = 2 sigma / lx,
 alpha_y = 2 sigma / ly (slope variance alpha^2 / 2 an axis, as in the ``microfacet`` model). The
-surface traced is the grid triangulated (geometry.heightfield.triangulate), and a facet's slopes
+surface traced is the grid triangulated (microsim.geometry.heightfield.triangulate), and a facet's slopes
 are differences of neighbouring samples, (h(x + pixel) - h(x)) / pixel, of variance
 2 sigma^2 (1 - exp(-pixel^2 / lx^2)) / pixel^2: smaller than the continuous one by
 1 - pixel^2 / (2 lx^2) to first order. :func:`field_parameters` chooses sigma, lx and ly so that

@@ -9,7 +9,7 @@ the scatterer's albedo) and the phase function ``phase``:
 - ``isotropic``: 1 / (4 pi), whose half space has Chandrasekhar's closed form (``rte_isotropic``).
 
 The albedo is in the table's config (a run of several albedos traces the largest, conventions §4).
-No triangles: the medium integrator (:mod:`microsim.integrators.medium`) samples exponential
+No triangles: the medium integrator (:mod:`microsim.tracer.integrators.medium`) samples exponential
 free flights and exact phase-function directions. Nothing random belongs to a realization (the
 medium is homogeneous): a realization is an independent batch of paths. Every resolved value
 is in the table's ``scene/`` attrs.
@@ -23,9 +23,9 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from microsim.integrators.medium import Medium
+from microsim.core.schema import Section
 from microsim.physics.phase import PHASES
-from microsim.schema import Section
+from microsim.tracer.integrators.medium import Medium
 
 KIND = "halfspace_medium"
 INTEGRATOR = "medium"

@@ -7,7 +7,7 @@ Two sources of heights:
   taken: a square array h (n x n samples) of one period, sample (i, j) at (i pixel, j pixel),
   height ``height_scale`` h. Nothing is random: every realization is the same tile.
 - ``generator = "gaussian"``: a random Gaussian surface drawn afresh every realization
-  (:mod:`geometry.gaussian_surface`): ``roughness`` (or ``rms_slope``, the same number), or
+  (:mod:`microsim.geometry.gaussian_surface`): ``roughness`` (or ``rms_slope``, the same number), or
   ``roughness_x`` + ``roughness_y``, in the ``microfacet`` model's Beckmann alpha meaning (the
   facets' slopes have variance alpha^2 / 2 along each axis), ``correlation_length`` (the
   Gaussian autocorrelation's length, geometric mean of x and y), ``pixel`` (default:
@@ -16,14 +16,14 @@ Two sources of heights:
 The period is n ``pixel``, and the grid wraps (the sample after the last is the first). Each
 grid cell is two triangles (:func:`triangulate`), each its own flat facet or, with ``shading =
 "smooth"``, shaded by its vertex normals interpolated: a heightfield is a
-:mod:`geometry.periodic_tile` like a user's mesh, laid and summarized as it is (not run through
+:mod:`microsim.geometry.periodic_tile` like a user's mesh, laid and summarized as it is (not run through
 the mesh checks: a periodic grid is a surface over the tile by construction); a generated one
 records in ``scene/`` per realization what a file's records once (area,
 mean_cosine, rms_slope, z_top, ...). With ``intersector = "grid"`` (the default) the scene also
 carries its grid (:func:`height_grid`), which the tracer walks instead of handing the triangles
-to Embree (:mod:`microsim.integrators.grid`: the same hits, faster). With ``statistics = true``
+to Embree (:mod:`microsim.tracer.integrators.grid`: the same hits, faster). With ``statistics = true``
 each realization's measured
-NDF, visible NDF and G1 are stored too (:mod:`microsim.surface_statistics`).
+NDF, visible NDF and G1 are stored too (:mod:`microsim.geometry.surface_statistics`).
 """
 
 from __future__ import annotations
@@ -36,18 +36,16 @@ import numpy as np
 import pydantic
 from pydantic import Field
 
-from microsim import surface_statistics
-from microsim.integrators.grid import HeightGrid
+from microsim.core.schema import Section
+from microsim.geometry import gaussian_surface, periodic_tile, surface_statistics
+from microsim.geometry.periodic_tile import Tile
 from microsim.physics import distributions as nd
-from microsim.scene import Scene
-from microsim.schema import Section
-
-from . import gaussian_surface, periodic_tile
-from .periodic_tile import Tile
+from microsim.tracer.integrators.grid import HeightGrid
+from microsim.tracer.scene import Scene
 
 KIND = "heightfield"
 INTEGRATOR = "surface"
-#: what sets the scene's size, for the memory refusal (microsim.runner.check_memory)
+#: what sets the scene's size, for the memory refusal (microsim.run.runner.check_memory)
 SIZE = "take fewer samples (a smaller array in scene.path; a shorter scene.tile or a larger scene.pixel)"
 #: how a .npy and a .npz (a zip file) begin
 NPY_MAGIC, NPZ_MAGIC = b"\x93NUMPY", b"PK\x03\x04"
@@ -177,7 +175,7 @@ def triangulate(h: np.ndarray, pixel: float) -> tuple[np.ndarray, np.ndarray]:
     """Vertices ((n + 1)^2, 3) and faces (2 n^2, 3) of the periodic grid of heights ``h`` (n x n):
     the last row and column of vertices repeat the first a period away. Cell (i, j) is split
     along its diagonal from (i, j) to (i + 1, j + 1) where i + j is even, along the other one
-    where it is odd (geometry.gaussian_surface: the facets' slopes along x and y are then not
+    where it is odd (microsim.geometry.gaussian_surface: the facets' slopes along x and y are then not
     correlated on average)."""
     n = len(h)
     wrapped = np.pad(h, ((0, 1), (0, 1)), mode="wrap")
@@ -195,7 +193,7 @@ def triangulate(h: np.ndarray, pixel: float) -> tuple[np.ndarray, np.ndarray]:
 
 def load(config) -> tuple[Tile, str]:
     """The checked tile of the config's height file and the file's SHA-256, read once
-    (:func:`geometry.periodic_tile.remembered`)."""
+    (:func:`microsim.geometry.periodic_tile.remembered`)."""
     return periodic_tile.remembered(config, _read)
 
 
@@ -286,7 +284,7 @@ def realize(resolved: dict, rng: np.random.Generator) -> Tile:
 
 
 def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
-    """The tile (:func:`geometry.periodic_tile.build`): the file's, or a Gaussian surface drawn
+    """The tile (:func:`microsim.geometry.periodic_tile.build`): the file's, or a Gaussian surface drawn
     from ``rng``, whose own summary (area, mean_cosine, rms_slope, heights) the scene's info
     carries; with ``statistics``, the realization's NDF and masking measured."""
     if resolved.get("generator") is None:
@@ -305,7 +303,7 @@ def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
 
 
 def height_grid(tile: Tile, laid: dict, scene: Scene, has_base: bool) -> HeightGrid:
-    """The grid the grid backend walks (microsim.integrators.grid): the tile's heights (its
+    """The grid the grid backend walks (microsim.tracer.integrators.grid): the tile's heights (its
     vertices as :func:`triangulate` lays them), where its own faces and the base lie in ``scene``."""
     n = math.isqrt(len(tile.vertices)) - 1
     heights = tile.vertices[:, 2].reshape(n + 1, n + 1)[:n, :n]

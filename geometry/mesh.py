@@ -6,15 +6,15 @@ are the periods L_x and L_y). With ``period`` (a square tile), or ``period_x`` a
 the tile is [0, L_x) x [0, L_y) in the mesh's coordinates (times ``scale``) and the mesh is laid
 where it lies: parts beyond a side, at most one period beyond, are wrapped
 in by the period, so closed bodies may cross the sides (a Boolean-sphere realization written by
-:func:`geometry.poisson_spheres.export_tile`); seams are matched a period apart wherever the
+:func:`microsim.geometry.poisson_spheres.export_tile`); seams are matched a period apart wherever the
 mesh's bounds put them. It is checked, laid and summarized as
-every periodic tile is (:mod:`geometry.periodic_tile`: refusals of meshes through which a ray
+every periodic tile is (:mod:`microsim.geometry.periodic_tile`: refusals of meshes through which a ray
 could leak, facets, copies beyond the sides, an optional ``[base]`` under it); every
 triangle is shaded by its own normal (``shading = "flat"``) or by its vertex normals
-interpolated (``"smooth"``: :func:`geometry.periodic_tile.corner_normals`; the file's own normals
+interpolated (``"smooth"``: :func:`microsim.geometry.periodic_tile.corner_normals`; the file's own normals
 are not read).
 The table also records the file's SHA-256; with ``statistics = true``, every realization's
-measured NDF, visible NDF and G1 (:mod:`microsim.surface_statistics`).
+measured NDF, visible NDF and G1 (:mod:`microsim.geometry.surface_statistics`).
 """
 
 from __future__ import annotations
@@ -26,16 +26,14 @@ import numpy as np
 import pydantic
 from pydantic import Field
 
-from microsim import surface_statistics
-from microsim.scene import Scene
-from microsim.schema import Section
-
-from . import periodic_tile
-from .periodic_tile import Tile
+from microsim.core.schema import Section
+from microsim.geometry import periodic_tile, surface_statistics
+from microsim.geometry.periodic_tile import Tile
+from microsim.tracer.scene import Scene
 
 KIND = "mesh"
 INTEGRATOR = "surface"
-#: what sets the scene's size, for the memory refusal (microsim.runner.check_memory)
+#: what sets the scene's size, for the memory refusal (microsim.run.runner.check_memory)
 SIZE = "take fewer triangles in scene.path"
 #: the generator protocol's, as every periodic tile has them
 for_backend, scene_bytes = periodic_tile.for_backend, periodic_tile.scene_bytes
@@ -77,7 +75,7 @@ class Config(Section):
 
 def load(config) -> tuple[Tile, str]:
     """The checked tile of the config's mesh file and the file's SHA-256, read once
-    (:func:`geometry.periodic_tile.remembered`); ValueError, one line naming scene.path."""
+    (:func:`microsim.geometry.periodic_tile.remembered`); ValueError, one line naming scene.path."""
     return periodic_tile.remembered(config, _read)
 
 
@@ -133,7 +131,7 @@ def resolve(config) -> dict:
 
 
 def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
-    """The tile (:func:`geometry.periodic_tile.build`); nothing is random but, with
+    """The tile (:func:`microsim.geometry.periodic_tile.build`); nothing is random but, with
     ``statistics``, the points the masking's shadow rays start from."""
     tile = load(config)[0]
     return surface_statistics.add(periodic_tile.build(tile, resolved, config.material, config.base), tile, resolved,

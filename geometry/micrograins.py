@@ -10,10 +10,10 @@ grains are made of ``[material]``, the plane of ``[base]`` (default: an absorber
 Exact grains (the default). Every grain is the same ellipsoid, so the map (x, y, z) ->
 (beta_x x, beta_y y, z) takes the field onto unit spheres centred on the plane: the grains are
 Embree's native spheres in that frame, traced through an instance that maps it back
-(:class:`microsim.embree.Scene`; the ray parameter t is the same in both frames, and normals go
+(:class:`microsim.tracer.embree.Scene`; the ray parameter t is the same in both frames, and normals go
 back by the inverse transpose). The lower halves of the spheres lie under the base plane, where
 no ray goes. Hit points are projected onto the ellipsoid and shaded with its exact normal
-(:func:`microsim.shapes.surface_point`). ``sphere_model = "exact"``, ``max_mesh_error = 0``.
+(:func:`microsim.tracer.shapes.surface_point`). ``sphere_model = "exact"``, ``max_mesh_error = 0``.
 
 Tessellated grains (``subdivisions`` or ``mesh_error``, and on the embreex backend, which traces
 triangles only). Each grain is an icosphere of the level whose largest distance to the unit
@@ -43,7 +43,7 @@ MAX_REACH_DEG = 89.5 deg, and the default tile never holds more than MAX_DEFAULT
 (dense fields of tall grains at the most grazing incidences: light does not get far in them;
 ``tile_grain_budget`` in the table says when the budget set the tile).
 A larger tile is not free: the offsets that keep scattered rays off their own grain grow with
-the float32 spacing of the coordinates (microsim/integrators/surface_transport.py), and where
+the float32 spacing of the coordinates (microsim/tracer/integrators/surface_transport.py), and where
 grains overlap an origin offset past a seam starts inside the neighbour (an "inside hit", passed
 through and counted; the rate grows with the tile, and stays below 1e-4 of the segments in the
 default tile of the most extreme field, tests/test_micrograins.py). A path that passes into a
@@ -65,14 +65,22 @@ import numpy as np
 import pydantic
 from pydantic import Field
 
+from microsim.core.schema import Section
+from microsim.geometry.poisson_spheres import (
+    EXACT_SPHERE_BYTES,
+    MAX_SUBDIVISIONS,
+    MIN_EXPECTED_OBJECTS,
+    TRIANGLE_BYTES,
+    is_exact,
+    level_for,
+    meshed_on_embreex,
+    periodic_images,
+    unit_icosphere,
+)
 from microsim.physics.boolean_model import grain_density, grain_extinction
-from microsim.materials import Absorber
-from microsim.scene import Scene, SceneBuilder
-from microsim.schema import Section
-from microsim.shapes import Shapes
-
-from .poisson_spheres import EXACT_SPHERE_BYTES, MAX_SUBDIVISIONS, MIN_EXPECTED_OBJECTS, TRIANGLE_BYTES, is_exact, \
-    level_for, meshed_on_embreex, periodic_images, unit_icosphere
+from microsim.tracer.materials import Absorber
+from microsim.tracer.scene import Scene, SceneBuilder
+from microsim.tracer.shapes import Shapes
 
 KIND = "micrograins"
 INTEGRATOR = "surface"

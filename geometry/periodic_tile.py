@@ -35,9 +35,9 @@ from pathlib import Path
 
 import numpy as np
 
-from microsim import files
-from microsim.scene import BASE_MARGIN, Scene, SceneBuilder
-from microsim.shapes import N_PARAMS, SMOOTH_PARAMS, Shapes
+from microsim.core import files
+from microsim.tracer.scene import BASE_MARGIN, Scene, SceneBuilder
+from microsim.tracer.shapes import N_PARAMS, SMOOTH_PARAMS, Shapes
 
 #: paths start and leave this fraction of the longer side above the highest point
 TOP_HEIGHT = 1e-2

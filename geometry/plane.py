@@ -5,8 +5,8 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from microsim.scene import Scene, SceneBuilder
-from microsim.schema import Section
+from microsim.core.schema import Section
+from microsim.tracer.scene import Scene, SceneBuilder
 
 KIND = "plane"
 INTEGRATOR = "surface"

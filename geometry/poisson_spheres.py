@@ -20,8 +20,8 @@ Both models draw the same centres for the same seed, so the two can be compared 
 realization.
 
 ``shading = "flat"`` (icospheres only) lays the same icospheres as a user's periodic tile is laid
-(:mod:`geometry.periodic_tile`): the realization's spheres, all with their centre in the tile,
-are one :class:`~geometry.periodic_tile.Tile` of triangles, each its own flat facet (hits
+(:mod:`microsim.geometry.periodic_tile`): the realization's spheres, all with their centre in the tile,
+are one :class:`~microsim.geometry.periodic_tile.Tile` of triangles, each its own flat facet (hits
 projected onto its plane, shaded by its normal; ``"smooth"``: by its vertex normals
 interpolated, as a smooth mesh is), with the copies of the triangles that reach into
 the tile a period either way in place of the spheres' periodic images; paths start ``TOP_HEIGHT``
@@ -80,14 +80,13 @@ from pydantic import Field
 from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation
 
+from microsim.core.schema import Section
+from microsim.geometry import periodic_tile
+from microsim.geometry.periodic_tile import Tile
 from microsim.physics.boolean_model import free_path, number_density
 from microsim.physics.rng import geometry_rng
-from microsim.scene import Scene, SceneBuilder
-from microsim.schema import Section
-from microsim.shapes import Shapes
-
-from . import periodic_tile
-from .periodic_tile import Tile
+from microsim.tracer.scene import Scene, SceneBuilder
+from microsim.tracer.shapes import Shapes
 
 KIND = "poisson_spheres"
 INTEGRATOR = "surface"

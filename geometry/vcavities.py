@@ -15,7 +15,7 @@ D(m') = D(m), the facets m and m' of all grooves together have projected-area de
 The groove is infinitely long and a V is scale-free, so the path is traced in the groove's
 cross-section of half-width 1 and depth tan(theta_m) from a uniform point of its aperture; its
 motion along the axis changes nothing. It leaves when it rises through the aperture
-(:mod:`microsim.integrators.vcavity`). This is exact (no tile, no end effects, no periodic
+(:mod:`microsim.tracer.integrators.vcavity`). This is exact (no tile, no end effects, no periodic
 images, no finite set of grooves per realization: a realization is an independent batch of
 paths), which neither "one groove family per realization" nor "many families side by side"
 would be: a finite family is a finite sample of D, and families side by side meet at ends.
@@ -63,10 +63,10 @@ import numpy as np
 import pydantic
 from pydantic import Field
 
-from microsim.integrators.vcavity import CANONICAL_FACES, Grooves
-from microsim.materials import row_length
+from microsim.core.schema import Section
 from microsim.physics import distributions as nd
-from microsim.schema import Section
+from microsim.tracer.integrators.vcavity import CANONICAL_FACES, Grooves
+from microsim.tracer.materials import row_length
 
 KIND = "vcavities"
 INTEGRATOR = "vcavity"

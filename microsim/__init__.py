@@ -1,6 +1,6 @@
 """microsim: ground-truth BRDF tables from explicit random microgeometry."""
 
-from . import numba_setup
+from microsim.tracer.jit import numba_setup
 
 __version__ = "0.1.0"
 

@@ -10,7 +10,7 @@ import sys
 
 def main(argv=None) -> int:
     try:
-        from .cli import main as command_line
+        from microsim.cli import main as command_line
     except KeyboardInterrupt:
         sys.stderr.write("microsim: error: stopped by SIGINT\n")
         sys.stderr.flush()

@@ -2,8 +2,8 @@
 ``chi2.py`` for BSDFs).
 
 :func:`material_check`: a material's sampling against its ``evaluate`` and ``pdf``
-(:mod:`microsim.materials`), on the hemisphere of a tilted shading normal. Directions are drawn
-with :func:`~microsim.materials.scatter` and binned on a grid in (cos theta, phi) of the normal's
+(:mod:`microsim.tracer.materials`), on the hemisphere of a tilted shading normal. Directions are drawn
+with :func:`~microsim.tracer.materials.scatter` and binned on a grid in (cos theta, phi) of the normal's
 frame; the bins' expected counts are the pdf integrated over them (Gauss-Legendre product rules),
 bins expected to hold fewer than ``MIN_EXPECTED`` samples pooled, as Mitsuba does. Three
 statistics, each with its p-value:
@@ -25,9 +25,9 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from .materials import evaluate, pdf, row_length, scatter
-from .physics.rng import path_state
-from .physics.sampling import orthonormal_basis, reflect
+from microsim.physics.rng import path_state
+from microsim.physics.sampling import orthonormal_basis, reflect
+from microsim.tracer.materials import evaluate, pdf, row_length, scatter
 
 #: bins expected to hold fewer samples are pooled into one
 MIN_EXPECTED = 5.0
@@ -82,7 +82,7 @@ def material_check(material, theta_i_deg: float, samples: int = 200_000, seed: i
                    normal=(0.3, -0.2, 0.9), grid=(20, 40), sample=scatter) -> MaterialCheck:
     """The three statistics of ``material`` (a validated material section, e.g.
     ``MATERIALS["lambert"](kind="lambert", albedo=0.5)``) for light arriving at ``theta_i_deg``
-    from the shading normal ``normal``; ``sample`` replaces :func:`~microsim.materials.scatter`
+    from the shading normal ``normal``; ``sample`` replaces :func:`~microsim.tracer.materials.scatter`
     (a numba function of its signature) to show that a broken sampler fails."""
     from scipy import stats
 

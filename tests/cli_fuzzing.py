@@ -22,8 +22,8 @@ from pathlib import Path
 from hypothesis import strategies as st
 
 from microsim import tables
+from microsim.app.sweep import INDEX
 from microsim.cli import main
-from microsim.sweep import INDEX
 
 BASES = {
     "plane": {"scene": {"kind": "plane"}, "material": {"kind": "lambert", "albedo": 0.5}},

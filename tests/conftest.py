@@ -11,8 +11,9 @@ Runs in subprocesses, and tracers a test calls itself (``executors.trace_units``
 
 import pytest
 
-from microsim import runner, tables
+from microsim import tables
 from microsim.config import validate
+from microsim.run import runner
 
 #: paths from which a test is marked slow (the README: ``-m "not slow"`` leaves them out)
 SLOW_PATHS = 1_000_000

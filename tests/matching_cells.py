@@ -4,7 +4,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from microsim.sensor import Sensor
+from microsim.tracer.sensor import Sensor
 
 #: a sensor whose rings below have cell counts divisible by 4 (12, 24, 44, 52, 60 cells): each has
 #: cells centred at azimuths 0 and 90 deg, where the incidences are

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from microsim import models
-from microsim.frames import direction
+from microsim.core.frames import direction
 
 
 def random_pairs(n, seed, top=89.9):

@@ -12,10 +12,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from microsim import config, runner
 from refusals import assert_run_refused, small_config
 from stat_bounds import chi2_bound, chi2_lower_bound
+
+from microsim import config
+from microsim.run import runner
 
 ALBEDOS = [0.3, 0.6, 0.9, 0.99]
 REALIZATIONS = 16

@@ -12,9 +12,11 @@ import sys
 import numpy as np
 import pytest
 
-from microsim import config, embree, runner, tables
+from microsim import config, tables
 from microsim.cli import main
-from microsim.integrators import scheduler
+from microsim.run import runner
+from microsim.tracer import embree
+from microsim.tracer.integrators import scheduler
 
 
 def spheres(backend: str, paths: int = 24_000, **scene) -> dict:
@@ -104,7 +106,7 @@ def test_a_library_without_embree_symbols_is_unavailable_not_a_traceback(monkeyp
 def test_kernels_compile_in_a_fresh_process_before_the_library_is_used():
     """The runner compiles before it forks workers, before any scene: the direct kernel links to
     rtcIntersect1 by name, so compiling must load the library itself (it segfaulted without)."""
-    code = ("from microsim.integrators.surface import SurfaceTracer; from microsim.sensor import Sensor; "
+    code = ("from microsim.tracer.integrators.surface import SurfaceTracer; from microsim.tracer.sensor import Sensor; "
             "SurfaceTracer.compile(Sensor.build(20))")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]

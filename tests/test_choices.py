@@ -1,10 +1,12 @@
-"""One list each of the names a user chooses among (microsim.choices), and the modules that
+"""One list each of the names a user chooses among (microsim.core.choices), and the modules that
 implement them implement exactly those."""
 
 import typing
 
-from microsim import choices, config, runner
-from microsim.integrators import surface
+from microsim import config
+from microsim.core import choices
+from microsim.run import runner
+from microsim.tracer.integrators import surface
 
 
 def test_every_backend_named_is_implemented_and_no_other():
@@ -17,7 +19,7 @@ def test_every_executor_named_is_implemented_and_no_other():
 
 
 def test_the_command_line_offers_exactly_these():
-    """``--backend`` and ``--executor`` take their choices from microsim.choices."""
+    """``--backend`` and ``--executor`` take their choices from microsim.core.choices."""
     from microsim import cli
 
     options = {param.name: param for param in cli.run.params}

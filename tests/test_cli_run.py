@@ -49,7 +49,7 @@ def test_tables_are_bit_identical_for_any_number_of_workers_and_threads(tmp_path
     tables = {}
     for flags in (["--workers", "1"], ["--workers", "2"], ["--threads", "2"], ["--workers", "2", "--threads", "2"]):
         out = tmp_path / f"{'-'.join(flags)}.h5"
-        done = subprocess.run([sys.executable, "-m", "microsim.cli", "run", str(config), "--out", str(out), *flags],
+        done = subprocess.run([sys.executable, "-m", "microsim", "run", str(config), "--out", str(out), *flags],
                               capture_output=True, text=True)
         assert done.returncode == 0, done.stderr
         assert f"table written to {out}" in done.stdout
@@ -227,7 +227,7 @@ def test_shipped_configs_validate():
 def test_a_table_that_appears_while_the_run_traces_is_not_replaced(tmp_path, capsys, monkeypatch):
     """The overwrite check holds at the final rename, atomically, not only at start-up (issue 9,
     defect 4): the file that appeared is kept, and so is the run's table, under another name."""
-    from microsim import runner
+    from microsim.run import runner
 
     config = tmp_path / "small.toml"
     config.write_text(SPHERES.replace("paths = 20_000", "paths = 400"))
@@ -252,7 +252,9 @@ def test_a_table_that_appears_while_the_run_traces_is_not_replaced(tmp_path, cap
 
 
 def test_two_runs_to_the_same_new_path_do_not_both_succeed(tmp_path):
-    from microsim import config as config_module, runner, tables
+    from microsim import config as config_module
+    from microsim import tables
+    from microsim.run import runner
 
     path = tmp_path / "c.toml"
     path.write_text(SPHERES.replace("paths = 20_000", "paths = 400"))
@@ -283,7 +285,7 @@ def _exit_quietly(*args):
 def test_a_failing_worker_ends_the_run_in_one_line(failure, line, tmp_path, capsys, monkeypatch):
     """A worker whose exception does not pickle, or that exits without its units, must not leave
     the main process waiting (it did, for ever)."""
-    from microsim import executors
+    from microsim.run import executors
 
     config = tmp_path / "small.toml"
     config.write_text(SPHERES.replace("paths = 20_000", "paths = 400"))

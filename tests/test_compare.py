@@ -6,13 +6,14 @@ import numpy as np
 import pytest
 
 from microsim import models
+from microsim.analysis.compare import cell_averages
 from microsim.cli import main
-from microsim.compare import cell_averages
-from microsim.sensor import Sensor
+from microsim.tracer.sensor import Sensor
 
 
 def write_plane_table(directory, paths: int):
-    from microsim import config, runner, tables
+    from microsim import config, tables
+    from microsim.run import runner
 
     cfg = config.validate({
         "scene": {"kind": "plane"},
@@ -126,8 +127,8 @@ def test_cells_without_standard_error_are_refined_until_the_albedo_converges():
     """A narrow specular lobe (conductor grains, tau0 = 0.95, beta = 0.2, theta_i = 86 deg) on
     cells that no path reached (standard error 0): the model's albedo from the refined cell
     averages equals a 256 x 256 rule on every cell to ALBEDO_TOLERANCE."""
-    from microsim.compare import ALBEDO_TOLERANCE
-    from microsim.frames import direction
+    from microsim.analysis.compare import ALBEDO_TOLERANCE
+    from microsim.core.frames import direction
 
     model = models.create("micrograin", tau0=0.95, beta=0.2, material="conductor", eta=1.0152, k=6.6273)
     wi = direction(np.radians(86.0), 0.0)
@@ -143,7 +144,8 @@ def test_cells_without_standard_error_are_refined_until_the_albedo_converges():
 def test_figures_of_every_incidence_and_order_keep_their_own_names(tmp_path, capsys):
     """Issue 24, defect 4: two incidences of one theta_i, or two orders, into one directory wrote
     over each other's figures."""
-    from microsim import config, runner, tables
+    from microsim import config, tables
+    from microsim.run import runner
 
     cfg = config.validate({"scene": {"kind": "plane"}, "material": {"kind": "lambert", "albedo": 0.5},
                            "illumination": {"theta_i_deg": [60.0, 60.0], "phi_i_deg": [0.0, 90.0]},
@@ -161,7 +163,7 @@ def test_figures_of_every_incidence_and_order_keep_their_own_names(tmp_path, cap
 def test_figures_to_a_place_that_cannot_take_them_are_refused_before_the_work(small_table, tmp_path, capsys,
                                                                                command, monkeypatch):
     """Issue 24, defect 5: a --plot under a file ended in a traceback after the whole comparison."""
-    from microsim import compare as compare_module
+    from microsim.analysis import compare as compare_module
 
     (tmp_path / "file").write_text("")
     monkeypatch.setattr(compare_module, "compare", lambda *a, **k: pytest.fail("the work ran before the check"))
@@ -175,7 +177,8 @@ def test_figures_to_a_place_that_cannot_take_them_are_refused_before_the_work(sm
 def test_a_table_without_signal_is_refused_in_one_line(tmp_path, capsys):
     """Issue 24, defect 9: 2000 paths over 200 000 cells printed NaN and exited 0."""
     path = tmp_path / "sparse.h5"
-    from microsim import config, runner, tables
+    from microsim import config, tables
+    from microsim.run import runner
 
     cfg = config.validate({"scene": {"kind": "plane"}, "material": {"kind": "lambert", "albedo": 0.5},
                            "illumination": {"theta_i_deg": [0.0]}, "sensor": {"cells": 200_000},
@@ -190,7 +193,8 @@ def test_a_table_without_signal_is_refused_in_one_line(tmp_path, capsys):
 def medium_table(directory, seed: int, albedo: float = 0.9):
     """An isotropic half space (exact model: rte_isotropic) at 31 paths a cell: 25 000 paths an
     incidence over 800 cells, 32 realizations."""
-    from microsim import config, runner, tables
+    from microsim import config, tables
+    from microsim.run import runner
 
     cfg = config.validate({
         "scene": {"kind": "halfspace_medium", "phase": "isotropic"},
@@ -216,7 +220,7 @@ def test_chi_square_per_cell_of_an_exact_model_is_1_within_its_bounds_at_few_pat
     incidence's value falls outside its 99 % bounds with probability 0.01 (4 of 36 or more:
     probability 5e-4), and their mean is 1 within 4 standard deviations of a mean of 36. With
     each cell's own error (mean z^2) 9 of 36 fall outside here."""
-    from microsim import compare as compare_module
+    from microsim.analysis import compare as compare_module
 
     rows = [row for table in media
             for row in compare_module.compare(table, "rte_isotropic", albedo=0.9).as_dict()["per_incidence"]]
@@ -230,7 +234,7 @@ def test_chi_square_per_cell_of_an_exact_model_is_1_within_its_bounds_at_few_pat
 
 
 def test_a_model_3_percent_off_is_inconsistent(media):
-    from microsim import compare as compare_module
+    from microsim.analysis import compare as compare_module
 
     overall = compare_module.compare(media[0], "rte_isotropic", albedo=0.93).as_dict()["overall"]
     assert not overall["consistent"] and overall["albedo_z2"] > overall["albedo_z2_bound"]

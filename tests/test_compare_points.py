@@ -24,10 +24,11 @@ import re
 
 import numpy as np
 import pytest
-
 from scipy import stats
 
-from microsim import compare, fit, session, tables
+from microsim import tables
+from microsim.analysis import compare, fit
+from microsim.app import session
 from microsim.cli import main
 from microsim.models.radiative_transfer import single_scattering
 

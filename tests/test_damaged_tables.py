@@ -9,8 +9,10 @@ import h5py
 import numpy as np
 import pytest
 
-from microsim import compare, config, runner, tables
+from microsim import config, tables
+from microsim.analysis import compare
 from microsim.cli import main
+from microsim.run import runner
 
 COMPARE = ["--model", "lambert", "--param", "albedo=0.5", "--order", "1"]
 

@@ -13,12 +13,13 @@ from collections import Counter, defaultdict
 import pytest
 from distributed import LocalCluster
 from distributed.diagnostics.plugin import SchedulerPlugin
-
-from microsim import config as config_module
-from microsim import executors, runner, tables, unit_store
-from microsim.cli import main
 from test_resume import RUN, wait_for_units
 from test_sweep import same_table
+
+from microsim import config as config_module
+from microsim import tables
+from microsim.cli import main
+from microsim.run import executors, runner, unit_store
 
 SMALL = RUN.replace("paths = 2_560_000", "paths = 640_000")
 
@@ -120,7 +121,7 @@ def test_a_lost_cluster_ends_the_run_in_one_line_keeping_its_units(tmp_path):
                                "--no-dashboard"], **quiet)
     run = None
     try:
-        run = subprocess.Popen([sys.executable, "-m", "microsim.cli", "run", str(config), "--out", str(out),
+        run = subprocess.Popen([sys.executable, "-m", "microsim", "run", str(config), "--out", str(out),
                                 "--executor", "dask", "--scheduler", address], stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True)
         wait_for_units(run, out, 2)

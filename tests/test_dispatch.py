@@ -1,4 +1,4 @@
-"""Kernels chosen by a record's type (microsim.dispatch): the implementation of the record's
+"""Kernels chosen by a record's type (microsim.tracer.jit.dispatch): the implementation of the record's
 class is the one called, and a write it makes is seen by the code after it.
 
 numba 0.68's ``overload(inline="always")`` loses that write when an inlined function with an
@@ -10,7 +10,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from microsim.dispatch import Generic
+from microsim.tracer.jit.dispatch import Generic
 
 
 class Doubling(NamedTuple):

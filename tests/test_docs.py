@@ -33,7 +33,9 @@ def site_text(tmp_path_factory) -> str:
 
 
 def test_every_cli_option_config_key_model_and_dataset_is_in_the_docs(site_text):
-    from microsim import cli, config, models, sweep, table_layout, tables
+    from microsim import cli, config, models, tables
+    from microsim.app import sweep
+    from microsim.core import table_layout
 
     words = set(re.findall(r"[^\s,;()\[\]]+", site_text))
     missing = [f"microsim {name}" for name in cli.cli.commands if f"microsim {name}" not in site_text]
@@ -56,7 +58,7 @@ def test_the_home_page_lists_every_scene_kind_and_the_frames_are_stated_once():
     """The home page's table of scenes links every registered kind's page; the pages that say in
     which frame a table's cells lie say the scene's (the cells' azimuths are phi_o itself), and
     none says the cells are in relative azimuth."""
-    from geometry import SCENES
+    from microsim.geometry import SCENES
 
     home = (ROOT / "docs" / "index.md").read_text()
     table = home.split("## What it traces")[1].split("\n\n")[1]
@@ -120,3 +122,24 @@ def test_no_file_of_the_project_refers_to_a_path_outside_it():
             if OUTSIDE.search(line):
                 found.append(f"{name}:{number}: {line.strip()[:80]}")
     assert found == []
+
+
+def unnamed_modules(page: str) -> list[str]:
+    """Modules of microsim/ and geometry/ that the architecture page does not name: a module by
+    its file name (``name.py``), a package by its folder (``name/``)."""
+    missing = []
+    for folder in ("microsim", "geometry"):
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            named = f"{path.parent.name}/" if path.name == "__init__.py" else path.name
+            if f"`{named}" not in page and f"{named}`" not in page and f" {named}" not in page:
+                missing.append(str(path.relative_to(ROOT)))
+    return missing
+
+
+def test_the_architecture_page_names_every_module_and_the_readme_every_layer():
+    page = (ROOT / "docs" / "developer" / "architecture.md").read_text()
+    assert unnamed_modules(page) == []
+    assert unnamed_modules(page.replace("`fresnel.py`", "")) == ["microsim/physics/fresnel.py"]
+    readme = (ROOT / "README.md").read_text()
+    layers = sorted(p.parent.name for p in (ROOT / "microsim").glob("*/__init__.py"))
+    assert [layer for layer in layers if f"`{layer}/`" not in readme] == []

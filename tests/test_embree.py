@@ -1,9 +1,9 @@
-"""The Embree binding (microsim/embree.py): known hits, the layout check, one-line refusals."""
+"""The Embree binding (microsim/tracer/embree.py): known hits, the layout check, one-line refusals."""
 
 import numpy as np
 import pytest
 
-from microsim import embree
+from microsim.tracer import embree
 
 
 def test_the_binding_finds_known_hits_on_a_triangle_and_a_sphere():

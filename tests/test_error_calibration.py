@@ -5,7 +5,7 @@ them. Here the spread of z over many cells must match its reference distribution
 two-sided interval: errors too large fail as surely as errors too small.
 
 Reference distribution. A table's standard error is the spread of R per-realization estimates
-over sqrt(R) (microsim.runner.Estimate: sample variance with R - 1 in the denominator, over R).
+over sqrt(R) (microsim.run.runner.Estimate: sample variance with R - 1 in the denominator, over R).
 If the per-realization estimates are normal, z = (mean - exact) / stderr is Student-t with
 nu = R - 1 degrees of freedom, not normal: its variance is nu / (nu - 2) (1.15 for R = 16), and
 its sample variance over n cells is NOT chi2(n - 1) / (n - 1) (the t's heavy tails widen it). For
@@ -70,7 +70,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from microsim import config, runner, tables
+from microsim import config, tables
+from microsim.run import runner
 
 pytestmark = pytest.mark.slow  # 1.3 M paths on the plane, 2 x 0.8 M and 2 x 0.6 M on spheres
 

@@ -2,7 +2,7 @@
 and the runner, the unit store and the table writer carry its outputs by name.
 
 The checks run in a process of their own, with a numba cache of their own: the toy's hook is
-compiled into microsim's kernels, whose cache stamp then covers its file (microsim.kernel_cache),
+compiled into microsim's kernels, whose cache stamp then covers its file (microsim.tracer.jit.kernel_cache),
 and the suite's other processes, which do not register it, keep theirs.
 """
 
@@ -13,8 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from microsim import estimators, runner, tables, unit_store
+from microsim import tables
 from microsim.config import validate
+from microsim.run import runner, unit_store
+from microsim.tracer import estimators
 
 HERE = Path(__file__).resolve().parent
 

@@ -8,10 +8,11 @@ under 1e-3 of the exact one (benchmarks/tessellation.py), far below these errors
 
 import numpy as np
 import pytest
-
-from microsim import config, runner
-from microsim.orders import RESULT_ALL_ORDERS
 from stat_bounds import chi2_bound
+
+from microsim import config
+from microsim.core.orders import RESULT_ALL_ORDERS
+from microsim.run import runner
 
 REALIZATIONS = 16
 pytestmark = pytest.mark.slow  # 2 x 3 x 240 000 paths and 16 meshed scenes of ~0.4 M triangles

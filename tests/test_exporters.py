@@ -5,9 +5,10 @@ what either cannot hold, refused in one line."""
 import numpy as np
 import pytest
 
-from microsim import config, runner, tables
+from microsim import config, tables
 from microsim.cli import main
-from microsim.tabulated import TabulatedBRDF
+from microsim.models.tabulated import TabulatedBRDF
+from microsim.run import runner
 
 xr = pytest.importorskip("xarray")
 pytest.importorskip("h5netcdf")
@@ -177,7 +178,7 @@ def test_an_unwritable_folder_is_refused_before_the_work(full, capsys, fmt):
 
 SLOW_EXPORT = """
 import sys, time
-from microsim import exporters
+from microsim.interop import exporters
 from microsim.cli import main
 
 def slow(tabulated, path):

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from microsim import models, tables
+from microsim.analysis.compare import refined_cell_averages
+from microsim.analysis.fit import fit
 from microsim.cli import main
-from microsim.compare import refined_cell_averages
-from microsim.fit import fit
 
 #: relative standard error of the synthetic tables
 NOISE = 0.01
@@ -27,7 +27,8 @@ SEEDS = 30
 def medium_table(tmp_path_factory):
     """A real table (isotropic medium, albedo 0.9, 3 incidences, 400 cells): its sensor and
     incidences carry the synthetic tables, and its values the poor fit."""
-    from microsim import config, runner
+    from microsim import config
+    from microsim.run import runner
 
     cfg = config.validate({"scene": {"kind": "halfspace_medium", "phase": "isotropic"},
                            "material": {"kind": "lambert", "albedo": 0.9},
@@ -183,8 +184,8 @@ def test_fits_of_a_plane_are_exact(simulate, paths_per_cell):
 
 def test_a_parameter_without_default_starts_at_1_in_a_range_of_decades():
     """Issue 24, defect 15: beta in [0.001, 1000] started at 500, and a fit did not end in 120 s."""
-    from microsim import fit as fit_module
     from microsim import models
+    from microsim.analysis import fit as fit_module
 
     params = {p.name: p for p in models.get("micrograin").params}
     assert fit_module._start(params["beta"], None) == pytest.approx(1.0)

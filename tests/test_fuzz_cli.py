@@ -5,9 +5,8 @@ traceback (tests/cli_fuzzing.py; the full 500-case run is benchmarks/fuzz_cli.py
 import tempfile
 from pathlib import Path
 
-from hypothesis import HealthCheck, given, seed, settings
-
 from cli_fuzzing import cases, check
+from hypothesis import HealthCheck, given, seed, settings
 
 #: examples in the suite (the benchmark draws 500 and more)
 EXAMPLES = 200

@@ -1,5 +1,5 @@
 """Random Gaussian heightfields (geometry/gaussian_surface.py, scene heightfield with
-generator = "gaussian") and the statistics measured on them (microsim/surface_statistics.py).
+generator = "gaussian") and the statistics measured on them (geometry/surface_statistics.py).
 
 What is checked, and against what:
 
@@ -26,14 +26,13 @@ import math
 import h5py
 import numpy as np
 import pytest
+from refusals import assert_run_refused
 from scipy import stats
 
-import geometry
-from geometry import gaussian_surface, heightfield
-from microsim import config
+from microsim import config, geometry
+from microsim.geometry import gaussian_surface, heightfield
 from microsim.physics.rng import geometry_rng
-from microsim.sensor import Sensor
-from refusals import assert_run_refused
+from microsim.tracer.sensor import Sensor
 
 REALIZATIONS = 48
 BOUNDS = (0.0005, 0.9995)  # two-sided 99.9 %
@@ -194,8 +193,8 @@ def test_a_resumed_run_keeps_every_realizations_statistics_bit_for_bit(tmp_path,
     resumed from kept units writes the table a fresh run writes."""
     from test_sweep import same_table
 
-    from microsim import runner, unit_store
     from microsim.cli import main
+    from microsim.run import runner, unit_store
 
     path = tmp_path / "run.toml"
     path.write_text('[scene]\nkind = "heightfield"\ngenerator = "gaussian"\nroughness = 0.5\ntile = 4.0\n'

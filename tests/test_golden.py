@@ -63,7 +63,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from microsim import config, runner, tables
+from microsim import config, tables
+from microsim.run import runner
 
 DATA = Path(__file__).parent / "data"
 #: instruction sets Embree dispatches on, widest first, as Linux names them in /proc/cpuinfo, and
@@ -142,7 +143,7 @@ def trace(name: str, directory: Path, **changes) -> dict:
 def platform_key() -> str:
     """Machine, widest SIMD instruction set Embree runs and CPU vendor, e.g. 'x86_64-avx512f-GenuineIntel'.
 
-    ``max_isa`` in ``MICROSIM_EMBREE_CONFIG`` (see :mod:`microsim.embree`) caps the instruction
+    ``max_isa`` in ``MICROSIM_EMBREE_CONFIG`` (see :mod:`microsim.tracer.embree`) caps the instruction
     set, as ``benchmarks/cross_isa.py`` does to trace as another CPU would.
     """
     try:

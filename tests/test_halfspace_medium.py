@@ -13,20 +13,20 @@ import math
 import numba
 import numpy as np
 import pytest
-
-from microsim import config, models, runner
-from microsim.compare import cell_averages
-from microsim.frames import direction
-from microsim.integrators.medium import MediumTracer, scatter_direction
-from microsim.physics.phase import ISOTROPIC, LAMBERT_SPHERE
-from microsim.models import hfunctions as hf
-from microsim.physics.phase import phase_lambert_sphere, phase_lambert_sphere_cdf
-from microsim.models.quadrature import directional_albedo
-from microsim.models.radiative_transfer import single_scattering
-from microsim.physics.rng import path_state
 from refusals import assert_run_refused, small_config
 from stat_bounds import chi2_bound, chi2_lower_bound
 from thread_identity import assert_bit_identical_for_threads
+
+from microsim import config, models
+from microsim.analysis.compare import cell_averages
+from microsim.core.frames import direction
+from microsim.models import hfunctions as hf
+from microsim.models.quadrature import directional_albedo
+from microsim.models.radiative_transfer import single_scattering
+from microsim.physics.phase import ISOTROPIC, LAMBERT_SPHERE, phase_lambert_sphere, phase_lambert_sphere_cdf
+from microsim.physics.rng import path_state
+from microsim.run import runner
+from microsim.tracer.integrators.medium import MediumTracer, scatter_direction
 
 REALIZATIONS = 32
 SIGNAL = 3.0

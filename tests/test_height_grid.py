@@ -1,5 +1,5 @@
 """The grid intersector of heightfields (``intersector = "grid"``, the default;
-microsim/integrators/grid.py): the same triangles as Embree's, met by walking the grid.
+microsim/tracer/integrators/grid.py): the same triangles as Embree's, met by walking the grid.
 
 - The walk finds Embree's hits: on every query a Gaussian surface's paths made to Embree, and on
   rays along the grid's lines and through its vertices, hit or miss agree and t agrees to
@@ -20,18 +20,19 @@ import math
 
 import numpy as np
 import pytest
-
-from geometry import heightfield, periodic_tile
-from microsim import config, runner, tables
-from microsim.estimators import DEFAULT, build
-from microsim.integrators.direct import DirectBackend
-from microsim.integrators.grid import HeightGrid, walk
-from microsim.integrators.records import Beam
-from microsim.physics.rng import geometry_rng
-from microsim.sensor import Sensor
 from refusals import assert_run_refused, small_config
 from stat_bounds import chi2_bound, chi2_lower_bound
 from test_periodic_tile_physics import RIDGE_SAMPLES, ridges
+
+from microsim import config, tables
+from microsim.geometry import heightfield, periodic_tile
+from microsim.physics.rng import geometry_rng
+from microsim.run import runner
+from microsim.tracer.estimators import DEFAULT, build
+from microsim.tracer.integrators.direct import DirectBackend
+from microsim.tracer.integrators.grid import HeightGrid, walk
+from microsim.tracer.integrators.records import Beam
+from microsim.tracer.sensor import Sensor
 
 
 def gaussian(intersector: str, **scene) -> dict:

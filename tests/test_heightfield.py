@@ -14,8 +14,9 @@ import math
 import numpy as np
 import pytest
 
-from geometry.heightfield import triangulate
-from microsim import session, tables
+from microsim import tables
+from microsim.app import session
+from microsim.geometry.heightfield import triangulate
 
 
 def bumps(n: int = 32) -> np.ndarray:
@@ -74,7 +75,7 @@ def test_a_bad_height_array_is_refused_in_one_line(make, message, tmp_path, tmp_
 
 def test_the_cells_are_split_along_alternating_diagonals():
     """Cell (i, j) is split along (i, j)-(i+1, j+1) where i + j is even and along (i+1, j)-(i, j+1)
-    where it is odd (geometry.gaussian_surface: the facets' x and y slopes are then uncorrelated
+    where it is odd (microsim.geometry.gaussian_surface: the facets' x and y slopes are then uncorrelated
     on average)."""
     vertices, faces = triangulate(np.zeros((2, 2)), 1.0)
     n = 2

@@ -1,11 +1,11 @@
-"""numba's inliner copies a callee's blocks with one copy of its scope (microsim/inlining.py)."""
+"""numba's inliner copies a callee's blocks with one copy of its scope (microsim/tracer/jit/inlining.py)."""
 
 import copy
 
 import numba
 from numba.core import compiler, inline_closurecall
 
-from microsim import inlining
+from microsim.tracer.jit import inlining
 
 
 def branchy(x):

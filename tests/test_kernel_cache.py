@@ -1,4 +1,4 @@
-"""numba caches of microsim's kernels carry a stamp of every microsim source (microsim/kernel_cache.py)."""
+"""numba caches of microsim's kernels carry a stamp of the sources they carry (microsim/tracer/jit/kernel_cache.py)."""
 
 import os
 import pickle
@@ -6,8 +6,8 @@ from pathlib import Path
 
 from numba.core import caching
 
-from microsim import kernel_cache
-from microsim.kernel_cache import PackageStamped, package_stamp
+from microsim.tracer.jit import kernel_cache
+from microsim.tracer.jit.kernel_cache import PackageStamped, package_stamp
 
 
 def test_the_package_stamp_follows_every_source_and_skips_lock_files_and_broken_links(tmp_path):
@@ -22,7 +22,7 @@ def test_the_package_stamp_follows_every_source_and_skips_lock_files_and_broken_
     assert package_stamp(tmp_path) != first
 
 
-def test_every_numba_locator_adds_the_package_stamp_for_microsim_files_only(tmp_path):
+def test_every_numba_locator_adds_the_carried_stamp_for_microsim_files_only(tmp_path):
     locators = kernel_cache.cache_impl()._locator_classes
     assert all(issubclass(locator, PackageStamped) for locator in locators)
     in_tree = next(locator for locator in locators if issubclass(locator, caching.InTreeCacheLocator))
@@ -31,10 +31,12 @@ def test_every_numba_locator_adds_the_package_stamp_for_microsim_files_only(tmp_
         return 0
 
     inside = in_tree.from_function(kernel, kernel_cache.__file__)
-    assert inside.get_source_stamp()[1:] == (*(package_stamp(root) for root in kernel_cache.STAMP_SOURCES),
+    assert inside.get_source_stamp()[1:] == (*(package_stamp(root) for root in kernel_cache.tracer_sources()),
                                               kernel_cache.plugin_stamp())
     assert isinstance(inside.get_source_stamp(), kernel_cache.Stamp)
-    assert kernel_cache.STAMP_SOURCES[1].name == "geometry"
+    assert kernel_cache.geometry_folder() in kernel_cache.tracer_sources()
+    model = in_tree.from_function(kernel, str(kernel_cache.PACKAGE / "models" / "hfunctions.py"))
+    assert model.get_source_stamp()[-3] == package_stamp(kernel_cache.PACKAGE / "models")
     outside_file = tmp_path / "elsewhere.py"
     outside_file.write_text("def kernel():\n    return 0\n")
     outside = in_tree.from_function(kernel, str(outside_file))
@@ -51,7 +53,7 @@ def test_a_run_compiles_nothing_once_its_tracer_is_compiled_ahead(tmp_path):
 
     code = """
 from numba.core import event
-from microsim import config, runner
+from microsim import config; from microsim.run import runner
 cfg = config.validate({"scene": {"kind": "halfspace_medium", "phase": "isotropic"},
                        "material": {"kind": "lambert", "albedo": [0.3, 0.9]}, "illumination": {"theta_i_deg": [30.0]},
                        "sensor": {"cells": 50}, "run": {"paths": 2000, "realizations": 2}})
@@ -72,19 +74,36 @@ print(compiled)
     assert done.stdout.strip() == "[]"
 
 
-def test_an_edit_of_a_generator_recompiles_the_kernels(tmp_path):
-    """Issue 25: the stamp covered microsim/ only, yet a kernel carried constants from geometry/
-    (the V-cavity tracer froze a generator's facet table into its machine code). In a copy of the
-    sources, a kernel loads from the cache when nothing changed, and compiles again after an
-    edit of a generator."""
+#: edits of a copy of the sources, each with whether it recompiles the tracer's kernels
+EDITS = (
+    ("microsim/analysis/compare.py", "docstring", False),
+    ("microsim/cli/__init__.py", "docstring", False),
+    ("microsim/tables/__init__.py", "docstring", False),
+    ("microsim/models/lambert.py", "docstring", False),
+    ("microsim/core/files.py", "docstring", False),
+    ("microsim/geometry/plane.py", "constant", True),
+    ("microsim/tracer/materials.py", "constant", True),
+    ("microsim/core/tally.py", "constant", True),
+)
+
+
+def test_a_kernel_recompiles_for_an_edit_of_what_it_carries_and_for_no_other(tmp_path):
+    """In a copy of the sources laid out as a wheel installs them (microsim/geometry inside the
+    package), a tracer kernel loads from the cache when nothing it carries changed: an edit of
+    the analysis, the command line, the table reader, a model or the file helpers recompiles
+    nothing; an edit of a generator, a tracer module or the tally's constants recompiles it."""
     import shutil
     import subprocess
     import sys
 
-    root = Path(kernel_cache.PACKAGE).parent
-    for package in ("microsim", "geometry"):
-        shutil.copytree(root / package, tmp_path / package, ignore=shutil.ignore_patterns("__pycache__"))
-    code = ("from microsim.compile_watch import CompileWatch\n"
+    root = kernel_cache.PACKAGE.parent
+    shutil.copytree(root / "microsim", tmp_path / "microsim", ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(kernel_cache.geometry_folder(), tmp_path / "microsim" / "geometry",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    code = ("import microsim.geometry\n"
+            "from microsim.tracer.jit import kernel_cache\n"
+            "assert kernel_cache.geometry_folder().parent == kernel_cache.PACKAGE\n"
+            "from microsim.tracer.jit.compile_watch import CompileWatch\n"
             "with CompileWatch() as watch:\n"
             "    from microsim.physics.rng import stream_key\n"
             "    stream_key(1, 2, 3)\n"
@@ -98,14 +117,18 @@ def test_an_edit_of_a_generator_recompiles_the_kernels(tmp_path):
 
     assert compiles()  # a fresh copy: nothing cached
     assert not compiles()  # loaded from the cache
-    plane = tmp_path / "geometry" / "plane.py"
-    plane.write_text(plane.read_text() + "\nAN_EDITED_CONSTANT = 1\n")
-    assert compiles()
+    seen = []
+    for name, what, recompiles in EDITS:
+        path = tmp_path / name
+        text = path.read_text()
+        path.write_text(text.replace('"""', '"""Edited. ', 1) if what == "docstring" else text + "\nAN_EDITED_CONSTANT = 1\n")
+        seen.append((name, compiles()))
+    assert seen == [(name, recompiles) for name, _, recompiles in EDITS]
 
 
 def test_a_plugin_registered_from_another_file_joins_the_stamp(tmp_path, monkeypatch):
     """An estimator's hook compiled into microsim's kernels from another module
-    (microsim.dispatch): an edit of its file changes the stamp; microsim's own files are stamped
+    (microsim.tracer.jit.dispatch): an edit of its file changes the stamp; microsim's own files are stamped
     already and are not added."""
     monkeypatch.setattr(kernel_cache, "PLUGIN_SOURCES", set())
     kernel_cache.add_plugin_source(kernel_cache.__file__)

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from microsim.physics.fresnel import fresnel_conductor, fresnel_dielectric
-from microsim.materials import MATERIALS, Absorber, Conductor, Lambert, codes, row_length, scatter
-from microsim.scene import MaterialTable
+from microsim.tracer.materials import MATERIALS, Absorber, Conductor, Lambert, codes, row_length, scatter
+from microsim.tracer.scene import MaterialTable
 
 
 def plane(material, theta, paths=200_000, cells=400):
@@ -167,7 +167,7 @@ def test_evaluate_and_pdf_of_the_flat_interfaced_lambertian_are_its_closed_form(
 
     import numba
 
-    from microsim.materials import evaluate, pdf
+    from microsim.tracer.materials import evaluate, pdf
 
     material = MATERIALS["interfaced_lambert"].model_validate({"kind": "interfaced_lambert", "albedo": 0.6, "eta": 1.4})
     row = np.array(material.row())

@@ -4,12 +4,13 @@
 import numpy as np
 import pytest
 
-from microsim import config, runner, tables
+from microsim import config, tables
 from microsim.cli import main
-from microsim.integrators import embreex
-from microsim.integrators.surface import SurfaceTracer
 from microsim.physics.rng import geometry_rng
-from microsim.sensor import Sensor
+from microsim.run import runner
+from microsim.tracer.integrators import embreex
+from microsim.tracer.integrators.surface import SurfaceTracer
+from microsim.tracer.sensor import Sensor
 
 
 def spheres(paths: int, backend: str = "direct", **scene) -> config.Config:

@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from microsim import session, tables
+from microsim import tables
+from microsim.app import session
 
 N = 16  # cells a side of the bumpy tile
 

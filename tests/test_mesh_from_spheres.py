@@ -1,5 +1,5 @@
 """The same triangles, the same table (issue 28, item b): a Boolean-sphere realization exported as
-icospheres to a PLY tile (``geometry.poisson_spheres.export_tile``) and traced as scene ``mesh``
+icospheres to a PLY tile (``microsim.geometry.poisson_spheres.export_tile``) and traced as scene ``mesh``
 (``period`` = the tile, the same ``[base]``) gives that realization's table of
 ``poisson_spheres`` with ``shading = "flat"``, bit for bit.
 
@@ -33,9 +33,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from geometry import mesh, periodic_tile, poisson_spheres
-from microsim import config, runner
+from microsim import config
+from microsim.geometry import mesh, periodic_tile, poisson_spheres
 from microsim.physics.rng import geometry_rng
+from microsim.run import runner
 
 SPHERES = {"scene": {"kind": "poisson_spheres", "volume_fraction": 0.3, "tile": 10.0, "depth": 4.0,
                      "subdivisions": 1, "shading": "flat"},

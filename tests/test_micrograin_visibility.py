@@ -2,7 +2,7 @@
 
 What is checked. On realizations of the ``micrograins`` scene (geometry/micrograins.py: exact
 grains, Embree native spheres in the frame scaled by (beta_x, beta_y), held in an instance),
-shadow rays are traced with :meth:`microsim.embree.Scene.occluded` and compared with the model
+shadow rays are traced with :meth:`microsim.tracer.embree.Scene.occluded` and compared with the model
 (microsim/models/micrograin_geometry.py):
 
 * G1^dist(w, h) (Eq. 16, 19: ``g1_distant``): points on the surface of grains whose centre lies
@@ -29,7 +29,7 @@ Shadow rays in a periodic tile. The scene holds one tile [0, L)^2 and the images
 cross its sides, so a ray is traced in segments: from its origin to the nearer of the plane
 z = TOP above every grain (reached unblocked: free) and the side of the tile (reached
 unblocked: it goes on from the opposite side), vectorised over all rays: the shadow rays of
-microsim.surface_statistics.leaves, which measures the masking of mesh and heightfield scenes.
+microsim.geometry.surface_statistics.leaves, which measures the masking of mesh and heightfield scenes.
 
 Sampling. The G1 points of a realization are drawn in proportion to its number of grains, so
 that every grain of every realization weighs the same (the Palm distribution the model
@@ -65,12 +65,12 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-import geometry
-from microsim import config, embree, shapes
-from microsim.physics.boolean_model import grain_density, grain_extinction, unit_space_direction_array
-from microsim.frames import direction
+from microsim import config, geometry
+from microsim.core.frames import direction
+from microsim.geometry.surface_statistics import leaves
 from microsim.models import micrograin_geometry as geo
-from microsim.surface_statistics import leaves
+from microsim.physics.boolean_model import grain_density, grain_extinction, unit_space_direction_array
+from microsim.tracer import embree, shapes
 
 REALIZATIONS = 64
 #: points kept (in the void) per realization per G1 case, on average

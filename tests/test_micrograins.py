@@ -23,13 +23,12 @@ import json
 
 import numpy as np
 import pytest
-
-import geometry
-from microsim import config, models
-from microsim.shapes import ELLIPSOID
-from microsim.compare import cell_averages
 from matching_cells import RECIPROCITY_CELLS, reciprocity_z, ring_incidences
 from stat_bounds import chi2_bound, chi2_lower_bound
+
+from microsim import config, geometry, models
+from microsim.analysis.compare import cell_averages
+from microsim.tracer.shapes import ELLIPSOID
 
 CONDUCTOR = {"kind": "conductor", "eta": 1.0152, "k": 6.6273}
 LAMBERT = {"kind": "lambert", "albedo": 0.5}
@@ -179,7 +178,8 @@ def incidences(tables):
 @pytest.fixture(scope="module")
 def single_tables(tmp_path_factory):
     """Order-1 tables on an absorbing base, by grain material and field (item b): a list each."""
-    from microsim import runner, tables
+    from microsim import tables
+    from microsim.run import runner
 
     out = {}
     directory = tmp_path_factory.mktemp("micrograins")
@@ -296,7 +296,8 @@ def test_white_furnace_returns_every_path(simulate, tau0, beta):
 @pytest.fixture(scope="module")
 def reciprocity_table(tmp_path_factory):
     """All orders on an anisotropic field, incidences at ring centres x phi_i in {0, 90} deg."""
-    from microsim import runner, tables
+    from microsim import tables
+    from microsim.run import runner
 
     incidences = ring_incidences()
     cfg = config.validate(micrograin_config((0.5, 0.5, 2.0), {"kind": "lambert", "albedo": 0.8},

@@ -7,9 +7,9 @@ import pytest
 from scipy.integrate import quad
 
 from microsim import models
-from microsim.physics.boolean_model import number_density, radius_over_free_path
-from microsim.frames import direction
+from microsim.core.frames import direction
 from microsim.models.boolean_spheres import common_volume, finite_size_ratio, lit_visible_height, shadow_hiding
+from microsim.physics.boolean_model import number_density, radius_over_free_path
 
 
 def test_common_volume_of_perpendicular_rays_is_a_quarter_steinmetz_solid_outside_the_ball():

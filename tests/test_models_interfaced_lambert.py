@@ -4,17 +4,16 @@ import math
 
 import numpy as np
 import pytest
+from model_helpers import assert_rejected, assert_zero_below_horizon, random_pairs
 
 from microsim import models
-from microsim.physics import fresnel
-from microsim.physics.fresnel import fresnel_dielectric_array
-from microsim.physics import distributions as nd
+from microsim.core.frames import direction
 from microsim.models import interfaced_lambert as il
 from microsim.models.microfacet import specular_brdf
-from microsim.frames import direction
 from microsim.models.quadrature import directional_albedo
-
-from model_helpers import assert_rejected, assert_zero_below_horizon, random_pairs
+from microsim.physics import distributions as nd
+from microsim.physics import fresnel
+from microsim.physics.fresnel import fresnel_dielectric_array
 
 
 def _gl(n, a, b):

@@ -13,8 +13,11 @@ from scipy import stats
 from scipy.special import lpmv
 
 from microsim import models
+from microsim.core.frames import direction
 from microsim.models import hfunctions as hf
 from microsim.models import lambert_sphere as ls
+from microsim.models.quadrature import directional_albedo, hemisphere_rule
+from microsim.models.radiative_transfer import single_scattering
 from microsim.physics.phase import (
     legendre_coefficients,
     phase_lambert_sphere,
@@ -22,9 +25,6 @@ from microsim.physics.phase import (
     sample_phase_approx,
     sample_phase_exact,
 )
-from microsim.frames import direction
-from microsim.models.quadrature import directional_albedo, hemisphere_rule
-from microsim.models.radiative_transfer import single_scattering
 
 MODELS = [
     ("lambert_sphere", {"method": "fit"}),

@@ -11,10 +11,15 @@ import math
 import numba
 import numpy as np
 import pytest
+from model_helpers import assert_rejected, assert_zero_below_horizon
 from scipy.integrate import quad
 from scipy.special import roots_legendre
 
 from microsim import models
+from microsim.cli import main
+from microsim.core.frames import direction
+from microsim.models import micrograin_geometry as geo
+from microsim.models.quadrature import directional_albedo
 from microsim.physics.boolean_model import (
     grain_density,
     grain_extinction,
@@ -23,13 +28,7 @@ from microsim.physics.boolean_model import (
     unit_space_height,
     unit_space_height_array,
 )
-from microsim.cli import main
 from microsim.physics.fresnel import fresnel_array, fresnel_conductor_array
-from microsim.models import micrograin_geometry as geo
-from microsim.frames import direction
-from microsim.models.quadrature import directional_albedo
-
-from model_helpers import assert_rejected, assert_zero_below_horizon
 
 LAMBERT_BULK = dict(bulk="lambert", bulk_albedo=0.6)
 MODEL_CASES = [

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from microsim import models
-from microsim.frames import direction
+from microsim.core.frames import direction
 from microsim.models.quadrature import directional_albedo
 
 SIGMAS = [0.0, 0.05, 0.3, 1.0, math.pi / 2 - 1e-6]

@@ -31,10 +31,11 @@ import math
 import numpy as np
 import pytest
 import trimesh
-
 from matching_cells import RECIPROCITY_CELLS, reciprocity_z, ring_incidences
-from microsim import config, runner, tables
 from refusals import SMALL_RUN, assert_run_refused
+
+from microsim import config, tables
+from microsim.run import runner
 
 WHITE = {"kind": "lambert", "albedo": 1.0}
 MIRROR = {"kind": "mirror"}
@@ -137,7 +138,7 @@ def run_table(data: dict, directory) -> tables.Table:
 def test_the_walled_tile_is_a_closed_periodic_surface():
     """The test's mesh is what the energy test needs: walls that are vertical, seams that match,
     the tile covered once, every edge off the sides shared."""
-    from geometry.periodic_tile import checked
+    from microsim.geometry.periodic_tile import checked
 
     vertices, faces = walled()
     tile = checked("walled", vertices, faces, None, closed_by_base=False)
@@ -153,7 +154,7 @@ def test_the_walled_tile_is_a_closed_periodic_surface():
 @pytest.mark.parametrize("material", [WHITE, MIRROR], ids=["white", "mirror"])
 def test_a_white_or_mirror_closed_tile_returns_every_path(kind, material, shading, files, tmp_path):
     """Smooth shading too: the weight is the material's whatever the normal, and a direction
-    sampled under its facet meets the surface again (microsim/shapes.py)."""
+    sampled under its facet meets the surface again (microsim/tracer/shapes.py)."""
     table = run_table({
         "scene": scene(kind, files, shading), "material": material,
         "illumination": {"theta_i_deg": [t for t, _ in ENERGY_INCIDENCES], "phi_i_deg": [p for _, p in ENERGY_INCIDENCES]},

@@ -9,7 +9,8 @@ pytestmark = pytest.mark.slow  # 8 M paths
 
 @pytest.fixture(scope="module")
 def plane_table(tmp_path_factory):
-    from microsim import config, runner, tables
+    from microsim import config, tables
+    from microsim.run import runner
 
     cfg = config.validate({
         "scene": {"kind": "plane"},

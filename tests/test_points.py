@@ -1,4 +1,4 @@
-"""Next-event estimation at exact directions (microsim.estimators.points), against exact results.
+"""Next-event estimation at exact directions (microsim.tracer.estimators.points), against exact results.
 
 - A Lambertian plane: every path adds albedo / pi, so every point of every incidence is exactly
   albedo / pi with zero spread, also for each albedo of a list traced together.
@@ -23,9 +23,11 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from microsim import config, models, runner, session, tables
-from microsim.orders import ORDERS
+from microsim import config, models, tables
+from microsim.app import session
+from microsim.core.orders import ORDERS
 from microsim.physics.phase import phase_lambert_sphere
+from microsim.run import runner
 
 #: two-sided level of the Hotelling bounds
 ALPHA = 1e-3
@@ -178,7 +180,7 @@ def test_points_averaged_over_a_cell_are_the_binned_cell(scene):
     3 x 3 Gauss-Legendre nodes with the cos weight (Sensor.cell_quadrature): the mean of the
     points equals the cell's binned f, order 1 and all orders, realization by realization
     (the two estimates share their paths: their difference is tested)."""
-    from microsim.sensor import Sensor
+    from microsim.tracer.sensor import Sensor
 
     sensor = Sensor.build(30)
     cells = sensor.lookup(np.array([[math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)]

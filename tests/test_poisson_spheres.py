@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-import geometry
-from microsim import config, embree, materials
+from microsim import config, geometry
 from microsim.physics.boolean_model import free_path
 from microsim.physics.rng import geometry_rng
+from microsim.tracer import embree, materials
 
 SPHERES = geometry.SCENES["poisson_spheres"]
 

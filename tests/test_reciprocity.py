@@ -10,7 +10,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from microsim.sensor import Sensor
+from microsim.tracer.sensor import Sensor
 
 CELLS = 300
 RINGS = (2, 4, 6, 8, 9)
@@ -19,7 +19,8 @@ pytestmark = pytest.mark.slow  # 2 M paths
 
 @pytest.fixture(scope="module")
 def table(tmp_path_factory):
-    from microsim import config, runner, tables
+    from microsim import config, tables
+    from microsim.run import runner
 
     theta = np.degrees(Sensor.build(CELLS).ring_centres()[list(RINGS)])
     cfg = config.validate({

@@ -25,18 +25,25 @@ import math
 import numpy as np
 import pytest
 
-from microsim.estimators import build
-from microsim.integrators.records import allocate_rays
-from microsim.integrators.surface import SurfaceTracer
-from microsim.integrators.surface_transport import BOTTOM, SIDE_X, SIDE_Y, TOP, prepare_segment, wrap_point, \
-    wrap_side
-from microsim.materials import Lambert
-from microsim.orders import ORDERS
+from microsim.core.orders import ORDERS
+from microsim.core.tally import TRANSMITTED, TRUNCATED
 from microsim.physics.rng import stream_key
-from microsim.scene import SceneBuilder
-from microsim.sensor import Sensor
-from microsim.shapes import Shapes
-from microsim.tally import TRANSMITTED, TRUNCATED
+from microsim.tracer.estimators import build
+from microsim.tracer.integrators.records import allocate_rays
+from microsim.tracer.integrators.surface import SurfaceTracer
+from microsim.tracer.integrators.surface_transport import (
+    BOTTOM,
+    SIDE_X,
+    SIDE_Y,
+    TOP,
+    prepare_segment,
+    wrap_point,
+    wrap_side,
+)
+from microsim.tracer.materials import Lambert
+from microsim.tracer.scene import SceneBuilder
+from microsim.tracer.sensor import Sensor
+from microsim.tracer.shapes import Shapes
 
 LX, LY = 4.0, 1.0
 #: the ridge's cross-section (x, z): flat, a steep wall up to z = 2, a flat top, a steep wall down

@@ -9,14 +9,15 @@ import numpy as np
 import pytest
 from scipy.stats import chi2 as chi2_distribution
 
-from microsim import config, runner, tables
+from microsim import config, tables
 from microsim.cli import main
-from microsim.table_noise import normal_squares
-from microsim.tabulated import TabulatedBRDF
+from microsim.core.table_noise import normal_squares
+from microsim.models.tabulated import TabulatedBRDF
+from microsim.run import runner
 
 mi = pytest.importorskip("mitsuba")
-plugin = pytest.importorskip("microsim.mitsuba")
-render = pytest.importorskip("microsim.render")
+plugin = pytest.importorskip("microsim.interop.mitsuba")
+render = pytest.importorskip("microsim.interop.render")
 
 SIZE, SPP, RENDERS = 48, 16, 8
 
@@ -233,8 +234,8 @@ def test_a_render_is_written_in_the_format_of_its_suffix(suffix, magic, tmp_path
 SCALAR_CHECK = """
 import sys, numpy as np, mitsuba as mi
 mi.set_variant("scalar_rgb")
-from microsim import mitsuba as plugin, tables
-from microsim.tabulated import TabulatedBRDF
+from microsim import tables; from microsim.interop import mitsuba as plugin
+from microsim.models.tabulated import TabulatedBRDF
 tabulated = TabulatedBRDF(tables.load(sys.argv[1]))
 bsdf, ctx = plugin.bsdf(tabulated), mi.BSDFContext()
 rng = np.random.default_rng(8)

@@ -12,12 +12,12 @@ import time
 from pathlib import Path
 
 import pytest
-
-from microsim import config as config_module
-from microsim import runner, unit_store
-from microsim.cli import main
 from test_cli_run import SPHERES
 from test_sweep import same_table
+
+from microsim import config as config_module
+from microsim.cli import main
+from microsim.run import runner, unit_store
 
 #: test_cli_run's small spheres, with units long enough to be stopped between
 RUN = SPHERES.replace('name = "small"', 'name = "resumable"').replace("paths = 20_000", "paths = 2_560_000") \
@@ -33,7 +33,7 @@ def saved(out: Path) -> int:
 
 
 def start(config: Path, out: Path, *flags) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "microsim.cli", "run", str(config), "--out", str(out), *flags],
+    return subprocess.Popen([sys.executable, "-m", "microsim", "run", str(config), "--out", str(out), *flags],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
@@ -167,7 +167,7 @@ def test_progress_counts_resumed_units_as_done_and_times_only_the_traced(tmp_pat
     (issue 24, defect 14), and the line says so while numba compiles."""
     from types import SimpleNamespace
 
-    from microsim import progress as progress_module
+    from microsim.app import progress as progress_module
 
     path = tmp_path / "run.toml"
     path.write_text(RUN)
@@ -258,7 +258,7 @@ def test_damaged_unit_files_are_traced_again(tmp_path, capsys):
 def test_a_signal_while_the_tables_are_written_waits_for_them():
     """Once tracing is over a signal no longer interrupts: the tables are written and the store
     cleared first, then the run stops saying so (the message must not claim no table)."""
-    from microsim import interrupts
+    from microsim.core import interrupts
 
     events = []
     with pytest.raises(interrupts.Stopped) as stopped:

@@ -1,18 +1,19 @@
 """Retro rings (``[sensor] retro_rings``): the fine tally about the retro direction that resolves
-the opposition peak (microsim/sensor.py). Checked against exact BRDFs, on rings that the horizon
+the opposition peak (microsim/tracer/sensor.py). Checked against exact BRDFs, on rings that the horizon
 cuts as well as whole ones, and shown not to disturb the ordinary tables."""
 
 import math
 
 import numpy as np
 import pytest
-
-from microsim import config, runner, tables
-from microsim.orders import RESULT_ALL_ORDERS
-from microsim.models.radiative_transfer import single_scattering
-from microsim.sensor import Sensor, retro_ring
 from refusals import assert_run_refused, small_config
 from stat_bounds import chi2_bound, chi2_lower_bound
+
+from microsim import config, tables
+from microsim.core.orders import RESULT_ALL_ORDERS
+from microsim.models.radiative_transfer import single_scattering
+from microsim.run import runner
+from microsim.tracer.sensor import Sensor, retro_ring
 
 REALIZATIONS = 32
 

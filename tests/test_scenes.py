@@ -5,11 +5,11 @@ from typing import ClassVar, Literal
 import numpy as np
 import pytest
 
-import geometry
-from microsim import integrators, materials
-from microsim.materials import Absorber, Lambert
-from microsim.scene import BASE_MARGIN, SceneBuilder
-from microsim.shapes import PLANE, SPHERE, Shapes
+from microsim import geometry
+from microsim.tracer import integrators, materials
+from microsim.tracer.materials import Absorber, Lambert
+from microsim.tracer.scene import BASE_MARGIN, SceneBuilder
+from microsim.tracer.shapes import PLANE, SPHERE, Shapes
 
 
 def test_every_scene_kind_names_an_integrator_that_exists():

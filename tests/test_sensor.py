@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from microsim.sensor import Sensor
+from microsim.tracer.sensor import Sensor
 
 
 @pytest.mark.parametrize("cells", [1, 10, 100, 500, 3240, 10000])

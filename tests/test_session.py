@@ -1,4 +1,4 @@
-"""A run from Python (microsim.session) has every guarantee of the command line: a run, a run
+"""A run from Python (microsim.app.session) has every guarantee of the command line: a run, a run
 killed by SIGKILL and resumed, and a sweep give tables bit-identical to ``microsim run``'s; bad
 input is one line (RunRefused) with nothing written; progress and sweep points are told."""
 
@@ -7,19 +7,21 @@ import subprocess
 import sys
 
 import pytest
-
-from microsim import session, tables
-from microsim.cli import main
-from microsim.progress import Progress
 from test_cli_run import SPHERES
 from test_resume import RUN, UNITS, kill_at_half, saved
 from test_sweep import GRID, same_table
+
+from microsim import tables
+from microsim.app import session
+from microsim.app.progress import Progress
+from microsim.cli import main
 
 
 def test_a_run_from_python_is_the_command_line_s_table(tmp_path, capsys):
     """The command line runs the session too: both are also checked against the runner's
     tables written without it."""
-    from microsim import config as config_module, runner
+    from microsim import config as config_module
+    from microsim.run import runner
 
     config = tmp_path / "small.toml"
     config.write_text(SPHERES)
@@ -93,7 +95,7 @@ def test_a_python_run_killed_by_sigkill_resumes_bit_identical_to_the_command_lin
     config = tmp_path / "run.toml"
     config.write_text(RUN)
     out = tmp_path / "killed.h5"
-    script = f"from microsim import session; session.run({str(config)!r}, {str(out)!r}, workers=2)"
+    script = f"from microsim.app import session; session.run({str(config)!r}, {str(out)!r}, workers=2)"
     kill_at_half(subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                   text=True), out)
     kept = saved(out)

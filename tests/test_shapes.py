@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from microsim.shapes import ELLIPSOID, PLANE, SPHERE, Shapes, surface_point
+from microsim.tracer.shapes import ELLIPSOID, PLANE, SPHERE, Shapes, surface_point
 
 
 def project(shapes, k, points):

@@ -49,7 +49,7 @@ def tracing(out: Path) -> bool:
 
 def start_run(tmp_path, *options, ignore_hup=False):
     out = tmp_path / "stopped.h5"
-    command = [sys.executable, "-m", "microsim.cli", "run", str(RUN), "--paths", str(10**9), "--out", str(out), *options]
+    command = [sys.executable, "-m", "microsim", "run", str(RUN), "--paths", str(10**9), "--out", str(out), *options]
 
     def dispositions():
         """The run starts with default dispositions, whatever pytest inherited (a suite started

@@ -19,10 +19,10 @@ between the incoming ray and images of the outgoing one, visible at theta_i >= 6
 
 import numpy as np
 import pytest
+from stat_bounds import chi2_bound
 
 from microsim import models
 from microsim.models.radiative_transfer import single_scattering
-from stat_bounds import chi2_bound
 
 ALBEDO = 0.9
 REALIZATIONS = 16

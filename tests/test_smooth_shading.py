@@ -1,5 +1,5 @@
 """Smooth shading (``shading = "smooth"`` of the mesh, heightfield and icosphere scenes): vertex
-normals interpolated over each triangle (microsim/shapes.py, ``SMOOTH``), the corners' normals
+normals interpolated over each triangle (microsim/tracer/shapes.py, ``SMOOTH``), the corners' normals
 welded across the seams (geometry/periodic_tile.py, ``corner_normals``).
 
 - The shape: the point is projected onto the triangle's plane; the normal is the corners' at the
@@ -18,13 +18,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.stats import chi2
-
-from geometry import heightfield, periodic_tile, poisson_spheres
 from matching_cells import RECIPROCITY_CELLS, reciprocity_z, ring_incidences
-from microsim import config, runner, tables
-from microsim.shapes import MIN_SHADING_COSINE, SMOOTH, Shapes, surface_point
+from scipy.stats import chi2
 from test_periodic_tile_physics import ridges
+
+from microsim import config, tables
+from microsim.geometry import heightfield, periodic_tile, poisson_spheres
+from microsim.run import runner
+from microsim.tracer.shapes import MIN_SHADING_COSINE, SMOOTH, Shapes, surface_point
 
 DOWN = (0.0, 0.0, -1.0)
 

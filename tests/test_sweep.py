@@ -1,4 +1,4 @@
-"""Sweeps (docs/conventions.md §4, microsim/sweep.py): one table per point, each the same as the
+"""Sweeps (docs/conventions.md §4, microsim/app/sweep.py): one table per point, each the same as the
 point run alone, bit for bit; an index; bad sweeps refused in one line before anything is written."""
 
 import csv
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from microsim import config, tables
+from microsim.app.sweep import INDEX
 from microsim.cli import main
-from microsim.sweep import INDEX
 
 BASE = """[scene]
 kind = "poisson_spheres"

@@ -7,7 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from microsim import config, netcdf, runner, table_layout, tables
+from microsim import config, tables
+from microsim.core import table_layout
+from microsim.run import runner
+from microsim.tables import netcdf
 
 xr = pytest.importorskip("xarray")
 pytest.importorskip("h5netcdf")

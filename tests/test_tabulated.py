@@ -6,14 +6,19 @@ import dataclasses
 
 import numpy as np
 import pytest
+from refusals import assert_run_refused, small_config
 from scipy.stats import chi2 as chi2_distribution
 
-from microsim import compare, config, full_brdf, runner, table_noise, tables
+from microsim import config, tables
+from microsim.analysis import compare
 from microsim.cli import main
-from microsim.frames import direction
-from microsim.sensor import Sensor
-from microsim.tabulated import MAX_COS_GAP, TabulatedBRDF
-from refusals import assert_run_refused, small_config
+from microsim.config import full_brdf
+from microsim.config.full_brdf import MAX_COS_GAP
+from microsim.core import table_noise
+from microsim.core.frames import direction
+from microsim.models.tabulated import TabulatedBRDF
+from microsim.run import runner
+from microsim.tracer.sensor import Sensor
 
 SPHERES = {
     "scene": {"kind": "poisson_spheres", "volume_fraction": 0.3},

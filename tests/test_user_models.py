@@ -6,10 +6,11 @@ import math
 
 import numpy as np
 import pytest
-
-from microsim import compare, fit, models, tables
-from microsim.cli import main
 from test_compare import write_plane_table
+
+from microsim import models, tables
+from microsim.analysis import compare, fit
+from microsim.cli import main
 
 MODEL_FILE = '''
 import numpy as np

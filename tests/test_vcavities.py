@@ -23,20 +23,20 @@ import math
 import numba
 import numpy as np
 import pytest
-
-import geometry
-from microsim import config, executors, models, runner
-from microsim.compare import cell_averages
-from microsim.physics.fresnel import fresnel_array
-from microsim.tally import SEGMENTS
-from microsim.integrators.vcavity import VCavityTracer
-from microsim.physics import distributions as nd
-from microsim.physics.rng import path_state
-from microsim.sensor import Sensor
 from matching_cells import RECIPROCITY_CELLS, reciprocity_z, ring_incidences
 from refusals import assert_run_refused, small_config
 from stat_bounds import chi2_bound, chi2_lower_bound
 from thread_identity import assert_bit_identical_for_threads
+
+from microsim import config, geometry, models
+from microsim.analysis.compare import cell_averages
+from microsim.core.tally import SEGMENTS
+from microsim.physics import distributions as nd
+from microsim.physics.fresnel import fresnel_array
+from microsim.physics.rng import path_state
+from microsim.run import executors, runner
+from microsim.tracer.integrators.vcavity import VCavityTracer
+from microsim.tracer.sensor import Sensor
 
 CONDUCTOR = {"kind": "conductor", "eta": 0.2, "k": 3.9}
 #: dielectric-reflection facets: an interface of index 1.5 over a black body reflects F(i.h) alone
@@ -415,7 +415,7 @@ def test_embree_and_analytic_intersectors_trace_the_same_grooves():
     """Same streams, same grooves: the Embree intersector (float32, canonical groove) finds the
     same facets as the analytic one for all but a few paths, so the tables agree far inside their
     errors and the segment counts within 1e-4."""
-    from microsim import embree
+    from microsim.tracer import embree
 
     try:
         embree.load()

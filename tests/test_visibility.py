@@ -1,4 +1,4 @@
-"""The visibility query of every transport (microsim.integrators.walk.VISIBILITY), against an
+"""The visibility query of every transport (microsim.tracer.integrators.walk.VISIBILITY), against an
 independent computation: exp(-tau) in the medium, the groove's aperture in the cross-section, and
 rays against every periodic image of every sphere in numpy."""
 
@@ -7,16 +7,25 @@ import math
 import numba
 import numpy as np
 
-from microsim import config, embree, runner
-from microsim.estimators import DEFAULT, build
-from microsim.integrators.direct import DirectWorld
-from microsim.integrators.medium import Medium
-from microsim.integrators.scheduler import workspace
-from microsim.integrators.vcavity import CANONICAL_FACES, CANONICAL_VERTICES, LEFT, RIGHT, EmbreeGrooveWorld, \
-    Grooves, GrooveWorld
-from microsim.integrators.walk import visibility
+from microsim import config
 from microsim.physics.rng import geometry_rng
-from microsim.sensor import Sensor
+from microsim.run import runner
+from microsim.tracer import embree
+from microsim.tracer.estimators import DEFAULT, build
+from microsim.tracer.integrators.direct import DirectWorld
+from microsim.tracer.integrators.medium import Medium
+from microsim.tracer.integrators.scheduler import workspace
+from microsim.tracer.integrators.vcavity import (
+    CANONICAL_FACES,
+    CANONICAL_VERTICES,
+    LEFT,
+    RIGHT,
+    EmbreeGrooveWorld,
+    Grooves,
+    GrooveWorld,
+)
+from microsim.tracer.integrators.walk import visibility
+from microsim.tracer.sensor import Sensor
 
 
 @numba.njit

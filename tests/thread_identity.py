@@ -4,9 +4,9 @@ import math
 
 import numpy as np
 
-import geometry
+from microsim import geometry
 from microsim.physics.rng import geometry_rng, stream_key
-from microsim.sensor import Sensor
+from microsim.tracer.sensor import Sensor
 
 
 def assert_bit_identical_for_threads(tracer_class, cfg, paths: int) -> None:

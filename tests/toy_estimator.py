@@ -1,4 +1,4 @@
-"""A toy estimator, the example of ``microsim.estimators``: the fraction of paths that leave after
+"""A toy estimator, the example of ``microsim.tracer.estimators``: the fraction of paths that leave after
 each number of interactions (1, 2, 3, 4+), whatever their weight. tests/test_estimators.py
 registers it; it shows what a new estimator costs (this module and one registration)."""
 
@@ -7,9 +7,9 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from microsim.estimators import Estimator
-from microsim.estimators.hooks import ON_EXIT
-from microsim.orders import ORDERS
+from microsim.core.orders import ORDERS
+from microsim.tracer.estimators import Estimator
+from microsim.tracer.estimators.hooks import ON_EXIT
 
 
 class ExitCountsTally(NamedTuple):

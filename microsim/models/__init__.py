@@ -12,8 +12,8 @@ manner of Mitsuba 3).
 import importlib
 import pkgutil
 
-from .base import BRDFModel, Param, available, create, get, listing, register
-from .user_models import FunctionModel, UserModelError, as_model, model_class
+from microsim.models.base import BRDFModel, Param, available, create, get, listing, register
+from microsim.models.user_models import FunctionModel, UserModelError, as_model, model_class
 
 for _module in pkgutil.iter_modules(__path__):
     importlib.import_module(f"{__name__}.{_module.name}")

@@ -7,7 +7,6 @@ arrays of shape (N, 3). :meth:`BRDFModel.__call__` handles broadcasting and the 
 
 from __future__ import annotations
 
-import importlib
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -164,9 +163,6 @@ def _unit(w, name: str) -> np.ndarray:
 
 
 _REGISTRY: dict[str, type[BRDFModel]] = {}
-#: models defined outside this package, by name -> the module that registers them on import (it
-#: imports this one: importing it from the package would be a circle)
-ELSEWHERE = {"table": "microsim.tabulated"}
 
 
 def register(cls: type[BRDFModel]) -> type[BRDFModel]:
@@ -177,13 +173,11 @@ def register(cls: type[BRDFModel]) -> type[BRDFModel]:
 
 def available() -> list[str]:
     """Names of the registered models."""
-    return sorted(_REGISTRY.keys() | ELSEWHERE.keys())
+    return sorted(_REGISTRY.keys())
 
 
 def get(name: str) -> type[BRDFModel]:
     """The model class registered as ``name``."""
-    if name in ELSEWHERE and name not in _REGISTRY:
-        importlib.import_module(ELSEWHERE[name])
     try:
         return _REGISTRY[name]
     except KeyError:

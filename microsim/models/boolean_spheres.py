@@ -42,9 +42,9 @@ import math
 import numba
 import numpy as np
 
-from ..physics.boolean_model import radius_over_free_path
-from .base import BRDFModel, Param, register
-from .radiative_transfer import single_scattering
+from microsim.models.base import BRDFModel, Param, register
+from microsim.models.radiative_transfer import single_scattering
+from microsim.physics.boolean_model import radius_over_free_path
 
 #: Midpoint nodes across the common part of the two cylinders (t) and along it inside the ball (s),
 #: and the depth grid of O(h).

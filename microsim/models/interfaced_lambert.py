@@ -28,10 +28,10 @@ import math
 import numba
 import numpy as np
 
-from ..physics.fresnel import fresnel_dielectric, fresnel_dielectric_array, internal_diffuse_reflectance
-from ..physics import distributions as nd
-from .base import BRDFModel, Param, register
-from .microfacet import roughness_params, specular_brdf
+from microsim.models.base import BRDFModel, Param, register
+from microsim.models.microfacet import roughness_params, specular_brdf
+from microsim.physics import distributions as nd
+from microsim.physics.fresnel import fresnel_dielectric, fresnel_dielectric_array, internal_diffuse_reflectance
 
 #: Facet-normal rule of the body integral (Eq. 12): Gauss-Legendre nodes in xi1 (tilt) times
 #: midpoint nodes in xi2 (azimuth). Relative error against a rule 4 x finer in each direction,

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from .base import BRDFModel, Param, register
+from microsim.models.base import BRDFModel, Param, register
 
 
 @register

@@ -38,9 +38,9 @@ import math
 
 import numpy as np
 
-from . import hfunctions
-from .base import BRDFModel, Param, register
-from .radiative_transfer import single_scattering
+from microsim.models import hfunctions
+from microsim.models.base import BRDFModel, Param, register
+from microsim.models.radiative_transfer import single_scattering
 
 
 def albedo_from_kd(kd):

@@ -15,9 +15,9 @@ Default ``eta`` = 1.5 (a typical glass / plastic dielectric, as in the configs' 
 
 import numpy as np
 
-from ..physics.fresnel import fresnel_array
-from ..physics import distributions as nd
-from .base import BRDFModel, Param, register
+from microsim.models.base import BRDFModel, Param, register
+from microsim.physics import distributions as nd
+from microsim.physics.fresnel import fresnel_array
 
 
 def specular_brdf(wi, wo, distribution, roughness_x, roughness_y, gaf, eta, k=0.0) -> np.ndarray:

@@ -18,7 +18,7 @@ contribution of the grain layer of docs/conventions.md §5.3. ``interfaced_lambe
 not exact: the model's T = (1 - F(i.m)) (1 - F(o.m)) (Eq. 21-22) crosses the coat once each way
 and omits the internal reflections (the paper says so in Sec. 7), whereas the scenes'
 interfaced_lambert material follows every bounce under the interface (Fresnel and total internal
-reflection from inside, :mod:`microsim.materials`). On a flat facet the two body terms differ by
+reflection from inside, :mod:`microsim.tracer.materials`). On a flat facet the two body terms differ by
 the factor 1 / (eta^2 (1 - K_d r_i)) of the exact one (Meneveaux et al. 2015, Eq. 8-10;
 :mod:`microsim.models.interfaced_lambert`): 1 at eta = 1, otherwise above 1 for white bodies
 (1 / (1 - r_e) at K_d = 1) and below it for dark ones (-> 1 / eta^2), so a comparison of such
@@ -78,11 +78,11 @@ import math
 import numba
 import numpy as np
 
-from ..physics.boolean_model import grain_extinction, unit_space_direction, unit_space_height
-from ..physics.fresnel import fresnel, fresnel_conductor, fresnel_dielectric
-from ..materials import CONDUCTOR, INTERFACED_LAMBERT, LAMBERT, MIRROR
-from .base import BRDFModel, Param, register
-from .micrograin_geometry import end_graded_gauss_rule, ndf_value, shadowed_area
+from microsim.models.base import BRDFModel, Param, register
+from microsim.models.micrograin_geometry import end_graded_gauss_rule, ndf_value, shadowed_area
+from microsim.physics.boolean_model import grain_extinction, unit_space_direction, unit_space_height
+from microsim.physics.fresnel import fresnel, fresnel_conductor, fresnel_dielectric
+from microsim.tracer.materials import CONDUCTOR, INTERFACED_LAMBERT, LAMBERT, MIRROR
 
 #: Gauss-Legendre orders of Eq. 21: per height panel (three panels) and per azimuthal arc.
 HEIGHT_NODES = 24
@@ -98,7 +98,7 @@ GAF = Param("gaf", "distant GAF: direction-correlated (Eq. 18) or not (Eq. 17), 
 _BETA = Param("beta", "grain height / lateral semi-axis, isotropic (sets beta_x = beta_y)", None, *BETA_RANGE)
 
 #: Grain material -> the keys it takes besides ``material``: those of its ``[material]`` table
-#: (conventions §4). The kind codes are the tracer's (:mod:`microsim.materials`).
+#: (conventions §4). The kind codes are the tracer's (:mod:`microsim.tracer.materials`).
 GRAIN_KEYS = {"lambert": ("albedo",), "conductor": ("eta", "k"), "mirror": (), "interfaced_lambert": ("albedo", "eta")}
 GRAIN_CODES = {"lambert": LAMBERT, "conductor": CONDUCTOR, "mirror": MIRROR, "interfaced_lambert": INTERFACED_LAMBERT}
 #: Values of the grain keys a material does not take, after resolution (no interface: eta 1, k 0;
@@ -400,7 +400,7 @@ def _micrograin_kernel(wi, wo, field, surface, base_brdf, correlated, heights, a
     """f(i, o) of Eq. 20 for pairs of directions (N, 3), both above the horizon.
 
     ``field`` = (tau0, beta_x, beta_y); ``surface`` = (the grains' material kind code
-    (:mod:`microsim.materials`), albedo, eta, k): the diffuse term for lambert and
+    (:mod:`microsim.tracer.materials`), albedo, eta, k): the diffuse term for lambert and
     interfaced_lambert (with T), the specular term for all but lambert; ``heights`` and
     ``azimuths``: the Gauss rules (nodes, weights) of the diffuse term's two integrals.
     """

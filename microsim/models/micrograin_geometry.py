@@ -39,7 +39,7 @@ import math
 import numba
 import numpy as np
 
-from ..physics.boolean_model import grain_extinction, unit_space_direction_array
+from microsim.physics.boolean_model import grain_extinction, unit_space_direction_array
 
 #: Gauss-Legendre order of the height integral of the Smith Lambda (micrograin_smith).
 LAMBDA_NODES = 32

@@ -42,10 +42,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..physics.fresnel import fresnel_conductor_array, fresnel_dielectric_array
-from .base import Param, register
-from .micrograin import MicrograinParams
-from .micrograin_geometry import ndf, pore_visibility, smith_lambda
+from microsim.models.base import Param, register
+from microsim.models.micrograin import MicrograinParams
+from microsim.models.micrograin_geometry import ndf, pore_visibility, smith_lambda
+from microsim.physics.fresnel import fresnel_conductor_array, fresnel_dielectric_array
 
 #: The two Smith forms of the GAF (Lucas et al. 2023 use the separable one).
 GAF = Param("gaf", "Smith GAF: G1(i) G1(o), or height-correlated 1 / (1 + Lambda_i + Lambda_o)", "separable",

@@ -46,7 +46,7 @@ import math
 
 import numpy as np
 
-from .base import BRDFModel, Param, register
+from microsim.models.base import BRDFModel, Param, register
 
 
 @register

@@ -26,8 +26,8 @@ import math
 
 import numpy as np
 
-from .base import BRDFModel, Param, register
-from .hfunctions import ISOTROPIC_MODE, HFunction
+from microsim.models.base import BRDFModel, Param, register
+from microsim.models.hfunctions import ISOTROPIC_MODE, HFunction
 
 
 def single_scattering(wi, wo, albedo, phase=None) -> np.ndarray:
@@ -38,7 +38,7 @@ def single_scattering(wi, wo, albedo, phase=None) -> np.ndarray:
     take a tenth of a second to load, which listing the models need not pay.
     """
     if phase is None:
-        from ..physics.phase import phase_lambert_sphere as phase
+        from microsim.physics.phase import phase_lambert_sphere as phase
     return albedo * phase(-np.sum(wi * wo, axis=-1)) / (wi[..., 2] + wo[..., 2])
 
 

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import not_a_file
-from .base import BRDFModel, Param, get
+from microsim.core.files import not_a_file
+from microsim.models.base import BRDFModel, Param, get
 
 
 class UserModelError(ValueError):

@@ -58,7 +58,7 @@ import math
 import numpy as np
 from scipy.special import erf
 
-from .base import BRDFModel, Param, register
+from microsim.models.base import BRDFModel, Param, register
 
 ALPHA_LOW = 0.25
 ALPHA_HIGH = 0.9

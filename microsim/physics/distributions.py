@@ -20,12 +20,12 @@ Distributions (``roughness_x``, ``roughness_y`` act along the x and y axes of th
 Sampling: :func:`sample` maps uniform numbers (xi1, xi2) to facet normals of density
 D(m)(m.n) by a smooth bijection (the models' deterministic quadratures);
 :func:`sample_slope` draws the facet slope of that density in numba, one path at a time (the
-V-cavity tracer, :mod:`microsim.integrators.vcavity`).
+V-cavity tracer, :mod:`microsim.tracer.integrators.vcavity`).
 
 GAFs: ``smith`` (separable G1(i) G1(o), Eq. 16-18), ``smith_height_correlated``
 (1 / (1 + Lambda(i) + Lambda(o)), the height-correlated Smith form of Heitz 2014) and
 ``torrance_sparrow`` (V-cavities, Eq. 14; the exact single scattering of explicit V-grooves,
-:mod:`geometry.vcavities`). Smith's Lambda is exact for each distribution: closed forms for Beckmann (Eq. 19)
+:mod:`microsim.geometry.vcavities`). Smith's Lambda is exact for each distribution: closed forms for Beckmann (Eq. 19)
 and GGX (Eq. 21), a 1D Gauss-Legendre integral for ``gaussian`` (:func:`smith_lambda`).
 
 Accepted roughness: [ROUGHNESS_MIN, ROUGHNESS_MAX] = [1e-4, 10]. Below 1e-4 the lobe (width
@@ -51,7 +51,7 @@ import numba
 import numpy as np
 from scipy.special import erfc
 
-from .rng import uniform
+from microsim.physics.rng import uniform
 
 DISTRIBUTIONS = ("beckmann", "ggx", "gaussian")
 GAFS = ("smith", "smith_height_correlated", "torrance_sparrow")

@@ -17,7 +17,7 @@ from typing import Callable, NamedTuple
 import numba
 import numpy as np
 
-from .rng import uniform
+from microsim.physics.rng import uniform
 
 
 @numba.vectorize(["float64(float64)"], cache=True)

@@ -10,7 +10,7 @@ import math
 
 import numba
 
-from .rng import uniform
+from microsim.physics.rng import uniform
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

@@ -1,0 +1,123 @@
+"""Estimators: what the events of a path add to a table.
+
+An estimator is one module with one :class:`Estimator` subclass and one line in
+:data:`ESTIMATORS`. It declares
+
+- its tally fields: a ``NamedTuple`` class ``Record`` (defined in its module, so that numba
+  can cache the kernels that take it) whose fields are float64 arrays of the shapes
+  :meth:`Estimator.shapes` gives; the tracer allocates them per chunk of paths, after a row
+  axis and an albedo axis in a run of several albedos (:class:`microsim.core.tally.Tally`);
+- its hooks, numba implementations registered on its ``Record`` class in :mod:`.hooks`:
+  ``on_exit`` (a path leaves the surface) and ``on_interaction`` (a path is about to interact);
+  the walk of every integrator calls them (:mod:`microsim.tracer.integrators.walk`);
+- its reduction of a unit's fields to per-realization estimates, named (:meth:`Estimator.reduce`);
+  the reducer keeps the mean and standard error of each name over the realizations;
+- the datasets it writes (:meth:`Estimator.write`), from those estimates.
+
+The reducer (:mod:`microsim.run.runner`), the unit store and the table writer read the estimators'
+outputs by name and know none of them. The estimators: :mod:`.exit_bins`, the binning of exits
+on the sensor's cells (every run), and :mod:`.points`, next-event estimation at the sensor's
+exact directions (runs that ask for points).
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+from typing import ClassVar
+
+import numpy as np
+
+from microsim.core.tally import albedo_axis
+
+#: estimator name -> "module:class", imported on use; a run uses every estimator whose
+#: :meth:`Estimator.wanted` says so, in this order
+ESTIMATORS = {"exit_bins": "microsim.tracer.estimators.exit_bins:ExitBins", "points": "microsim.tracer.estimators.points:Points"}
+#: the estimators of a tracer used without a run (tests, benchmarks)
+DEFAULT = ("exit_bins",)
+
+
+class Estimator:
+    """What one estimator adds to a run (module doc); built for a run's ``sensor`` and ``plan``
+    (:class:`microsim.run.runner.Plan`; None for a tracer used without a run)."""
+
+    name: ClassVar[str]
+    #: the NamedTuple class of its tally fields (the kernels' hooks are registered on it)
+    Record: ClassVar[type]
+    #: the datasets it writes (microsim.core.table_layout.Dataset): the table's declared layout
+    DATASETS: ClassVar[tuple] = ()
+    #: the attributes of the table's root it writes (microsim.core.table_layout.Attribute)
+    ATTRIBUTES: ClassVar[tuple] = ()
+    #: the names of :meth:`reduce` whose estimates share their paths along the last axis: the
+    #: reducer keeps their covariance too (microsim.run.runner.Estimate.covariance)
+    COVARIANT: ClassVar[tuple] = ()
+
+    def __init__(self, sensor, plan=None):
+        self.sensor, self.plan = sensor, plan
+
+    @classmethod
+    def wanted(cls, config) -> bool:
+        """Whether a run of ``config`` uses this estimator."""
+        return True
+
+    def shapes(self) -> tuple[tuple[int, ...], ...]:
+        """The shape of each field of ``Record``, without the row and albedo axes."""
+        raise NotImplementedError
+
+    def allocate(self, rows: int, albedos: int):
+        """A zero ``Record`` of ``rows`` rows (and an albedo axis if ``albedos`` > 1)."""
+        return self.Record(*(np.zeros((rows, *albedo_axis(albedos), *shape)) for shape in self.shapes()))
+
+    def tally_values(self) -> int:
+        """How many numbers a row of its tally holds, for one albedo (for the memory estimate)."""
+        return sum(math.prod(shape) for shape in self.shapes())
+
+    def reduce(self, fields, paths: int, incidence: int) -> dict[str, np.ndarray]:
+        """The estimates of one unit (``fields``: its ``Record`` for one albedo, without the row
+        and albedo axes; ``paths`` traced at incidence number ``incidence``), by name."""
+        raise NotImplementedError
+
+    def estimate_values(self) -> int:
+        """How many numbers :meth:`reduce` returns for one unit (for the memory estimate)."""
+        raise NotImplementedError
+
+    def exited(self, estimates: dict[str, np.ndarray]) -> float:
+        """The share of the unit's energy that left through the top, as these estimates count it,
+        for the energy balance: one estimator of a run counts it (the exit binning), every other
+        returns 0."""
+        return 0.0
+
+    def write(self, put, estimates: dict) -> None:
+        """Write the datasets: ``put(name, array)`` stores one; ``estimates`` maps each name of
+        :meth:`reduce` to its per-incidence :class:`microsim.run.runner.Estimate` list."""
+        raise NotImplementedError
+
+    def attributes(self) -> dict:
+        """The attributes of the table's root it writes (those of ``ATTRIBUTES``), by name."""
+        return {}
+
+
+def get(name: str) -> type[Estimator]:
+    """The estimator class registered as ``name``."""
+    module, cls = ESTIMATORS[name].split(":")
+    return getattr(importlib.import_module(module), cls)
+
+
+def datasets() -> tuple:
+    """The datasets every registered estimator may write (``Estimator.DATASETS``), in order."""
+    return tuple(dataset for name in ESTIMATORS for dataset in get(name).DATASETS)
+
+
+def attributes() -> tuple:
+    """The root attributes every registered estimator may write (``Estimator.ATTRIBUTES``), in order."""
+    return tuple(attribute for name in ESTIMATORS for attribute in get(name).ATTRIBUTES)
+
+
+def names_for(config) -> tuple[str, ...]:
+    """The estimators a run of ``config`` uses."""
+    return tuple(name for name in ESTIMATORS if get(name).wanted(config))
+
+
+def build(names, sensor, plan=None) -> tuple[Estimator, ...]:
+    """The estimators ``names`` (of a run: ``plan``) on ``sensor``."""
+    return tuple(get(name)(sensor, plan) for name in names)

@@ -1,0 +1,105 @@
+"""The scheduler every integrator shares: a unit's paths in chunks, chunks in waves on threads.
+
+The paths of a unit are cut into chunks of ``CHUNK_PATHS`` consecutive paths, and the chunks
+into waves of up to ``WAVE_CHUNKS_PER_THREAD`` per thread. Each chunk is traced to completion
+into a tally of its own (a row of the :class:`Workspace`) by a kernel the integrator gives,
+``trace_share(first, start, stop)``: ``threads`` Python threads share a wave, one numba call each
+for a contiguous share of its chunks (:func:`thread_shares`), the call releasing the GIL. The
+chunk tallies are then summed in chunk order (:func:`microsim.core.tally.add_rows`). A path's random stream is
+keyed by its number, and a chunk's order of events depends on its paths alone, so a table
+depends neither on the number of threads nor on which thread traced which chunk: bit-identical
+for any thread count.
+
+Python threads rather than a numba ``prange``: numba's parallel loops take no tuples of arrays
+(the named bundles), and its OpenMP layer is not fork-safe (the runner forks worker processes
+after compiling). Chunk and wave sizes, and what they cost: docs/developer/performance.md.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+from concurrent.futures import ThreadPoolExecutor
+
+import numba
+import numpy as np
+
+from microsim.core.tally import COUNT_NAMES, ENERGY_NAMES, Tally, add_rows, albedo_axis, empty_tally
+from microsim.tracer import embree
+from microsim.tracer.integrators.records import Rays, allocate_paths
+
+#: paths of one chunk: traced in order by one thread, into a tally of their own (module doc)
+CHUNK_PATHS = 8192
+#: chunks of a wave per thread, each thread tracing a contiguous share in one call; the wave's
+#: chunk tallies are then summed in chunk order
+WAVE_CHUNKS_PER_THREAD = 4
+#: paths of a chunk traced side by side (:func:`trace_chunk`)
+SLOTS = 2
+
+#: SLOTS rows per chunk of a wave (the paths it is tracing, their segments and Embree queries:
+#: RTCRayHit records)
+#: and one row per chunk (its tally: the estimators' records, lost energy, counts); and the ray
+#: log (origin, direction, tfar of every query, in order; empty unless asked for)
+Workspace = namedtuple("Workspace", ["paths", "rays", "queries", "estimates", "energy", "counts", "log", "logged"])
+
+
+def workspace(rows: int, estimators, log_rays: int = 0, albedos: int = 1) -> Workspace:
+    """Tallies of ``estimators`` for ``rows`` chunks (of ``albedos`` albedos each), and SLOTS path
+    rows (paths, queries) for each: two query records at least, as the views into a single
+    record would be contiguous, which numba types apart (a second compile of every kernel)."""
+    queries = embree.ray_hits(SLOTS * rows)
+    rays = Rays(*embree.ray_views(queries), np.zeros(SLOTS * rows, np.int8))  # segments written into the queries
+    return Workspace(allocate_paths(SLOTS * rows), rays, queries,
+                     tuple(estimator.allocate(rows, albedos) for estimator in estimators),
+                     np.zeros((rows, *albedo_axis(albedos), len(ENERGY_NAMES))), np.zeros((rows, len(COUNT_NAMES)), np.int64),
+                     np.zeros((log_rays, 7), np.float32), np.zeros(1, np.int64))
+
+
+def wave_rows(n_paths: int, threads: int) -> int:
+    """Chunk rows a workspace needs for ``n_paths`` paths on ``threads`` threads: one wave's chunks."""
+    return min(WAVE_CHUNKS_PER_THREAD * threads, max(math.ceil(n_paths / CHUNK_PATHS), 1))
+
+
+def trace_in_waves(beam, estimators, threads: int, work: Workspace, trace_share):
+    """The tally of the beam's paths cut into chunks of CHUNK_PATHS, traced in waves of
+    :func:`wave_rows` chunks on ``threads`` threads: ``trace_share(first, start, stop)`` traces
+    chunks first+start .. first+stop-1 into the tally rows start .. stop-1 of ``work``, releasing
+    the GIL; each wave's rows are added in chunk order (:func:`microsim.core.tally.add_rows`)."""
+    n_chunks = math.ceil(beam.n_paths / CHUNK_PATHS)
+    wave_chunks = WAVE_CHUNKS_PER_THREAD * threads
+    total = empty_tally(beam.n_paths, estimators, beam.albedo_scale)
+    with ThreadPoolExecutor(threads) as pool:
+        for first in range(0, n_chunks, wave_chunks):
+            count = min(wave_chunks, n_chunks - first)
+            clear_rows(work, count)
+            shares = [(first, a, b) for a, b in thread_shares(first, count, beam.n_paths, threads) if b > a]
+            if len(shares) == 1:
+                trace_share(*shares[0])  # one share: no hand-over to a pool thread
+            else:
+                list(pool.map(lambda share: trace_share(*share), shares))
+            add_rows(total, work.estimates, work.energy, work.counts, count)
+    return total
+
+
+def thread_shares(first: int, count: int, n_paths: int, threads: int) -> list[tuple[int, int]]:
+    """Chunks first .. first+count-1 cut into ``threads`` contiguous shares (start, stop) of about
+    equal paths (the last chunk of a unit may be short)."""
+    done = np.minimum((first + np.arange(count + 1)) * CHUNK_PATHS, n_paths) - first * CHUNK_PATHS  # before chunk k
+    targets = done[-1] * np.arange(threads + 1) / threads
+    edges = np.abs(done[None, :] - targets[:, None]).argmin(axis=1)
+    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
+
+
+def clear_rows(work: Workspace, count: int) -> None:
+    """Zero the tallies of rows 0 .. count-1 of ``work``."""
+    for record in work.estimates:
+        for field in record:
+            field[:count] = 0.0
+    work.energy[:count] = 0.0
+    work.counts[:count] = 0
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def chunk_tally(work, j, beam):
+    """Tally row j of the workspace (zeroed by :func:`clear_rows`): where chunk j of a wave adds its paths."""
+    return Tally(0, j, work.estimates, work.energy[j], work.counts[j], beam.albedo_scale)
