@@ -18,7 +18,7 @@ import numpy as np
 from report import save_figures
 
 from microsim import config
-from microsim.run import runner
+from microsim.testing import trace, trace_albedos
 
 ALBEDOS = [0.3, 0.6, 0.9, 0.99]
 SCENES = {"medium": {"kind": "halfspace_medium", "phase": "lambert_sphere"},
@@ -32,14 +32,14 @@ def settings(scene, albedo, paths, seed):
 
 
 def measure(scene, paths, repeats) -> dict:
-    runner.run(settings(scene, 0.5, 1000, 9))  # compile (or load) the kernels first
+    trace(settings(scene, 0.5, 1000, 9))  # compile (or load) the kernels first
     best = {"joint": np.inf, "separate": np.inf}
     for _ in range(repeats):
         start = time.perf_counter()
-        joint = runner.run_albedos(settings(scene, ALBEDOS, paths, 1))
+        joint = trace_albedos(settings(scene, ALBEDOS, paths, 1))
         best["joint"] = min(best["joint"], time.perf_counter() - start)
         start = time.perf_counter()
-        separate = [runner.run(settings(scene, albedo, paths, 2)) for albedo in ALBEDOS]
+        separate = [trace(settings(scene, albedo, paths, 2)) for albedo in ALBEDOS]
         best["separate"] = min(best["separate"], time.perf_counter() - start)
     rows = []
     for albedo, a, b in zip(ALBEDOS, joint, separate):

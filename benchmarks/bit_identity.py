@@ -14,10 +14,10 @@ Prints one line per config and exits 1 if any table's datasets differ. A refacto
 a bit is checked with this before it lands; ``tests/test_golden.py`` keeps small tables of the
 same kind under test for every later commit.
 
-Across issue 8 the defaults moved by design (exact spheres on the direct backend, whose chunk
-sums also round differently): to compare a later checkout with a revision before it, trace this
-checkout as the old one did, ``--this-flags "--backend embreex"`` (exact spheres then become the
-former default icospheres, mesh_error 0.01, as the old revisions drew them).
+The default spheres are exact spheres on the direct backend (whose chunk sums also round
+differently from embreex's); against a revision whose default was icospheres on embreex, such
+as c8660dd, trace this checkout as that revision did, ``--this-flags "--backend embreex"``
+(exact spheres then become icospheres of mesh_error 0.01, as that revision drew them).
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ import numpy as np
 from microsim.tables import dict_to_toml
 
 ROOT = Path(__file__).resolve().parent.parent
-#: attributes not compared: provenance, and each dataset's SHA-256 digest (issue 9; its bytes are
+#: attributes not compared: provenance, and each dataset's SHA-256 digest (its bytes are
 #: compared themselves)
 PROVENANCE = {"created_utc", "wall_time_s", "backend", "backend_fallback", "sha256"}
 SHIPPED_PATHS = 20_000

@@ -12,7 +12,7 @@ C compiler), numba with its target CPU and features set to that x86-64 level
 
 Needs numpy 2.4 or later (its dispatch names) and a C compiler. ``measure`` prints, per golden
 and ISA, the largest move of any traced dataset as a fraction of the dataset's largest value (of
-its estimate, for a ``_stderr``: the measure of ``test_golden.HOST_TOLERANCE``), the largest
+its estimate, for a ``_stderr``: the measure of ``microsim.testing.golden.HOST_TOLERANCE``), the largest
 move of the layout in ulps and of the event counts in square roots of the largest count
 (``COUNT_SPREAD``); ``pytest`` runs the golden test under that emulation, where ``platform_key``
 names the capped instruction set, so the test takes its other-platform branch.
@@ -29,10 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "tests"))
+from microsim.testing import golden as goldens
 
-import test_golden  # noqa: E402
+ROOT = Path(__file__).resolve().parent.parent
 
 #: LLVM features of each x86-64 level (the psABI's x86-64-v2 and -v3; "avx" is v2 + AVX)
 _V2 = "64bit cmov cx8 fxsr mmx sse sse2 cx16 popcnt sahf sse3 sse4.1 sse4.2 ssse3"
@@ -81,8 +80,8 @@ def emulation(isa: str, directory: Path) -> dict:
 
 def trace_all(out: Path) -> None:
     """Trace every golden here, into ``out/<name>.npz`` (run in the emulated environment)."""
-    for name in test_golden.GOLDEN:
-        arrays = test_golden.trace(name, out)
+    for name in goldens.GOLDEN:
+        arrays = goldens.trace(name, out)
         np.savez(out / f"{name}.npz", **{key.replace("/", "."): value for key, value in arrays.items()})
 
 
@@ -92,7 +91,7 @@ def moves(now: dict, golden: dict) -> tuple[float, float, float]:
     traced = layout = counts = 0.0
     for key, expected in golden.items():
         change = np.abs(now[key].astype(float) - expected.astype(float))
-        if key.startswith(test_golden.LAYOUT):
+        if key.startswith(goldens.LAYOUT):
             if expected.dtype.kind == "f":
                 layout = max(layout, float(np.max(change / np.spacing(np.abs(expected)))))
         elif expected.dtype.kind != "f":
@@ -104,19 +103,19 @@ def moves(now: dict, golden: dict) -> tuple[float, float, float]:
 
 
 def measure(isas) -> None:
-    print(f"host {test_golden.platform_key()}; moves against the goldens of tests/data")
+    print(f"host {goldens.platform_key()}; moves against the goldens of tests/data")
     print(f"{'golden':18s} {'isa':7s} {'traced (fraction)':>18s} {'layout (ulps)':>14s} {'counts (sqrt)':>18s}  bound")
     for isa in isas:
         with tempfile.TemporaryDirectory() as tmp:
             tmp = Path(tmp)
             subprocess.run([sys.executable, __file__, "_trace", str(tmp)], env=emulation(isa, tmp), check=True)
-            for name in test_golden.GOLDEN:
-                golden, _ = test_golden.load_golden(name)
+            for name in goldens.GOLDEN:
+                golden, _ = goldens.load_golden(name)
                 with np.load(tmp / f"{name}.npz") as stored:
                     now = {key.replace(".", "/"): stored[key] for key in stored.files}
                 traced, layout, counts = moves(now, golden)
                 print(f"{name:18s} {isa:7s} {traced:18.3g} {layout:14.3g} {counts:18.3g}  "
-                      f"{test_golden.HOST_TOLERANCE[name]:g}")
+                      f"{goldens.HOST_TOLERANCE[name]:g}")
 
 
 def main() -> None:

@@ -3,7 +3,7 @@
 For each volume fraction, the order-1 table (max_order = 1, albedo 0.9, default tile) is compared
 with the single scattering of a half space of Lambert-sphere point scatterers,
 c p(-wi.wo) / (mu_i + mu_o) (d'Eon 2021, Eq. 1 and 10), averaged over each cell, on
-cells more than 10 deg from the retro direction (the measure of issue 2, acceptance d), and with
+cells more than 10 deg from the retro direction (the measure of tests/test_single_scattering.py), and with
 the finite-size model ``boolean_spheres_single`` (microsim/models/boolean_spheres.py: shadow
 hiding and the height of hit points above their centres, first order in r / l), on every cell.
 
@@ -32,7 +32,7 @@ from microsim import config as config_module
 from microsim import models
 from microsim.models.radiative_transfer import single_scattering
 from microsim.physics.boolean_model import free_path, number_density, radius_over_free_path
-from microsim.run import runner
+from microsim.testing import trace
 from microsim.tracer.sensor import Sensor, cell_index
 
 OUT = Path(__file__).resolve().parent / "out"
@@ -57,7 +57,7 @@ def engine_comparison(phi, theta_deg, paths, realizations, workers, cells):
         "sensor": {"cells": cells},
         "run": {"paths": paths, "realizations": realizations, "seed": 21, "max_order": 1},
     })
-    result = runner.run(cfg, workers=workers)
+    result = trace(cfg, workers=workers)
     model = models.create("boolean_spheres_single", albedo=ALBEDO, volume_fraction=phi)
     rows = []
     for i in range(len(theta_deg)):

@@ -1,4 +1,4 @@
-"""Is the energy balance of the default sphere tables 1? (issue 12, item f)
+"""Is the energy balance of the default sphere tables 1?
 
 An independent check found ``energy/balance`` (albedo + transmitted + truncated + absorbed, 1 in
 expectation: Russian roulette is unbiased) at 1 + 4-6e-5 at theta_i = 0 in three of four default
@@ -16,7 +16,7 @@ from pathlib import Path
 from report import save_figures
 
 from microsim import config
-from microsim.run import runner
+from microsim.testing import trace
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -34,7 +34,7 @@ def main():
         cfg = cfg.model_copy(update={"illumination": cfg.illumination.model_copy(
             update={"theta_i_deg": [0.0], "phi_i_deg": [0.0]})})
         start = time.perf_counter()
-        energy = runner.run(cfg, threads=2).energy[0]
+        energy = trace(cfg, threads=2).energy[0]
         excess, error = float(energy.mean[3] - 1.0), float(energy.stderr[3])
         figures[name] = {"balance_minus_1": excess, "stderr": error, "seconds": time.perf_counter() - start}
         z = f"{excess / error:+.2f} standard errors" if error > 0 else "exact"

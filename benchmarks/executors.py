@@ -1,4 +1,4 @@
-"""The Dask executor against the process pool on this machine (issue 13, acceptance e).
+"""The Dask executor against the process pool on this machine.
 
 Runs one config with ``--workers 2`` (forked processes) and with ``--executor dask --workers 2``
 (a LocalCluster of two single-threaded processes), alternated ``--repeats`` times so that both
@@ -23,10 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "tests"))
+from microsim.testing.tables import same_table
 
-from test_sweep import same_table  # noqa: E402
+ROOT = Path(__file__).resolve().parent.parent
 
 WAYS = {"process pool": ["--workers", "2"], "dask": ["--executor", "dask", "--workers", "2"]}
 

@@ -1,5 +1,5 @@
 """What a user sees on a terminal during a run: the compile announcement, and the time left
-against the true time left (issue 24, defect 14 and acceptance d).
+against the true time left.
 
 Runs ``microsim run`` under a pseudo-terminal (so the progress line is drawn), reads every
 state of the line as it is drawn, with its time, and reports: whether and when "compiling" was

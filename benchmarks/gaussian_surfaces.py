@@ -1,5 +1,5 @@
 """Gaussian random surfaces against microfacet theory: where Smith's masking holds, and where the
-V-cavity one does (issue 28, deliverable 5).
+V-cavity one does.
 
 Surfaces: scene heightfield, generator = "gaussian" (geometry/gaussian_surface.py), Beckmann
 alpha in ALPHAS (facets' slope variance alpha^2 / 2 an axis), correlation length 1, the default

@@ -1,6 +1,5 @@
 """A Gaussian heightfield traced as a heightfield (the grid backend's walk) against Embree's
-triangles (issue 28: "triangulated, or traced exactly as a heightfield if that is faster:
-measure").
+triangles: which is faster, for the same surface.
 
 The surface of runs/gaussian_alpha08_lambert.toml (alpha 0.8, its default tile: 228^2 samples,
 about 104 000 triangles; --run picks another heightfield run), its first realization, laid twice:
@@ -12,7 +11,7 @@ about 104 000 triangles; --run picks another heightfield run), its first realiza
    in order, answered by Embree (rtcIntersect1) and by the walk (``grid.walk``), ns a query.
    Both must find the same hits: hit or miss agree, and t to float32's precision (the fractions
    that do not are printed);
-3. whole runs (``runner.run``, --run-paths an incidence, 8 realizations, every incidence, a
+3. whole runs (``microsim.testing.trace``, --run-paths an incidence, 8 realizations, every incidence, a
    surface generated a realization, 1 and 2 threads), alternated.
 
 Printed and written (benchmarks/out/heightfield_tracing.json). Results:
@@ -38,7 +37,7 @@ from throughput import fused_trace, load, realization, replay, replay_direct  # 
 
 from microsim.core.tally import SEGMENTS  # noqa: E402
 from microsim.physics.rng import stream_key  # noqa: E402
-from microsim.run import runner  # noqa: E402
+from microsim.testing import trace
 from microsim.tracer.estimators import DEFAULT, build  # noqa: E402
 from microsim.tracer.integrators.grid import GridBackend, walk  # noqa: E402
 from microsim.tracer.integrators.records import Beam  # noqa: E402
@@ -107,14 +106,14 @@ def measure(cfg, paths: int, repeats: int) -> dict:
 
 
 def whole_runs(cfg, repeats: int) -> dict:
-    """Seconds of runner.run with each intersector on 1 and 2 threads (surfaces generated), alternated."""
+    """Seconds of a whole run (microsim.testing.trace) with each intersector on 1 and 2 threads (surfaces generated), alternated."""
     best = {}
     for _ in range(repeats):
         for threads in (1, 2):
             for intersector in ("triangles", "grid"):
                 run = cfg.model_copy(update={"scene": cfg.scene.model_copy(update={"intersector": intersector})})
                 start = time.perf_counter()
-                runner.run(run, threads=threads)
+                trace(run, threads=threads)
                 key = f"{intersector}_{threads}_threads_s"
                 best[key] = min(best.get(key, math.inf), time.perf_counter() - start)
     for threads in (1, 2):

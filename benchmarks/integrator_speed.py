@@ -3,8 +3,8 @@
 A tracer built from a small config, best of 3 batches of a fixed number of paths (after one
 small batch that compiles). Prints one JSON object. To compare two revisions, run it from each
 (``PYTHONPATH=<worktree> python benchmarks/integrator_speed.py``) in alternated processes,
-several of each (docs/developer/performance.md); a revision before issue 25 imports the random streams
-from ``microsim.rng``. ``python benchmarks/integrator_speed.py medium`` runs that case only.
+several of each (docs/developer/performance.md); against a revision whose random streams are
+``microsim.rng``, change the import to that. ``python benchmarks/integrator_speed.py medium`` runs that case only.
 About a minute.
 """
 import json
@@ -13,7 +13,7 @@ import time
 
 from microsim import config
 from microsim.physics.rng import geometry_rng, stream_key
-from microsim.run import runner
+from microsim.run.plan import Plan
 
 CASES = {
     "medium": ({"scene": {"kind": "halfspace_medium"}, "material": {"kind": "lambert", "albedo": 0.9}}, 400_000),
@@ -27,9 +27,9 @@ for name, (settings, paths) in CASES.items():
         continue
     cfg = config.validate({**settings, "illumination": {"theta_i_deg": [30.0]}, "sensor": {"cells": 400},
                            "run": {"paths": paths, "realizations": 2, "seed": 1}})
-    plan = runner.Plan.from_config(cfg)
+    plan = Plan.from_config(cfg)
     scene = plan.generator.generate(plan.scene, plan.config, geometry_rng(1, 0))
-    sensor = plan.build_sensor()
+    sensor = plan.sensor
     tracer = plan.tracer_class(scene, sensor, backend="direct", threads=1)
     wi = plan.incidence_direction(0)
     tracer.trace(wi, 1000, stream_key(1, 0, 0), 0)

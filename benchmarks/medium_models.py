@@ -1,5 +1,5 @@
 """The Lambert-sphere models against their own physics: the radiative-transfer half space of
-Lambert-sphere scatterers (issue 12, item b), every albedo from one run.
+Lambert-sphere scatterers, every albedo from one run.
 
 One run of ``halfspace_medium`` (phase ``lambert_sphere``) at albedos 0.3, 0.6, 0.9, 0.99
 (docs/conventions.md §4: traced once at 0.99), theta_i = 0, 30, 60, 80 deg, 3240 cells, --paths per
@@ -30,7 +30,7 @@ from report import OUT, save_figures
 
 from microsim import config, models, tables
 from microsim.analysis import compare
-from microsim.run import runner
+from microsim.testing import trace_albedos
 
 ALBEDOS = [0.3, 0.6, 0.9, 0.99]
 THETA_I = [0.0, 30.0, 60.0, 80.0]
@@ -45,7 +45,7 @@ def measure(paths: int, workers: int) -> list[dict]:
                            "illumination": {"theta_i_deg": THETA_I}, "sensor": {"cells": 3240},
                            "run": {"paths": paths, "realizations": 32, "seed": 1}})
     rows = []
-    for albedo, result in zip(ALBEDOS, runner.run_albedos(cfg, workers=workers)):
+    for albedo, result in zip(ALBEDOS, trace_albedos(cfg, workers=workers)):
         path = tables.write(OUT / "medium_models.h5", result, cfg, overwrite=True)
         table = tables.load(path)
         for label, (name, extra) in MODELS.items():

@@ -1,4 +1,4 @@
-"""Peak memory against triangle count (issue 13, deliverable 4): the sphere scenes up to
+"""Peak memory against triangle count: the sphere scenes up to
 phi = 0.6 at their full default depth and tile, with exact spheres and icospheres of growing
 level, traced by one process, two worker processes, two threads sharing one scene, and a Dask
 LocalCluster of two workers.
@@ -10,7 +10,7 @@ tree's proportional set size (what the run needs: forked workers share the inter
 with their parent, PSS counts each shared page once). The table's ``scene/triangles`` is the
 largest realization's count. A straight line through the one-process peaks against triangles
 gives the bytes a triangle costs and the largest scene a 24 GiB machine traces, with one
-process and with two workers; the runner's own estimate (``runner.memory_estimate``) is printed
+process and with two workers; the runner's own estimate (``memory.memory_estimate``) is printed
 beside each measured peak.
 
     python benchmarks/memory.py [--phis 0.1 0.3 0.6] [--levels 1 2 3] [--paths 80000]
@@ -36,7 +36,8 @@ sys.path.insert(0, str(ROOT))
 
 from microsim import config as config_module  # noqa: E402
 from microsim import tables
-from microsim.run import runner  # noqa: E402
+from microsim.run.memory import memory_estimate
+from microsim.run.plan import Plan
 
 MACHINE = 24 * 2**30
 CONFIG = """[scene]
@@ -111,14 +112,13 @@ def main():
                 ways = WAYS if level in (None, 2) else {k: v for k, v in WAYS.items() if k in ("1 process", "2 workers")}
                 peaks = {name: measure(config, flags, out) for name, flags in ways.items()}
                 table = tables.load(out)
-                plan = runner.Plan.from_config(config_module.load(config))
-                sensor = plan.build_sensor()
+                plan = Plan.from_config(config_module.load(config))
                 row = {"phi": phi, "sphere_model": "exact" if level is None else f"icosphere level {level}",
                        "triangles": int(table.scene["triangles"]),
                        "spheres": int(np.max(table.arrays.get("scene/spheres", [0]))),
                        "depth": float(table.scene["depth"]), "tile": float(table.scene["tile"]),
-                       "estimate_1": runner.memory_estimate(plan, sensor, 1),
-                       "estimate_2": runner.memory_estimate(plan, sensor, 2), "peaks": peaks}
+                       "estimate_1": memory_estimate(plan, 1),
+                       "estimate_2": memory_estimate(plan, 2), "peaks": peaks}
                 rows.append(row)
                 print(f"phi {phi} {row['sphere_model']}: {row['triangles']:,} triangles, {row['spheres']:,} spheres; "
                       + "; ".join(f"{k}: largest {v['largest_process_rss'] / 2**20:.0f} MiB, all {v['tree_pss'] / 2**20:.0f} MiB"

@@ -5,7 +5,7 @@ BSDF), and the tile / tessellation convergence of the scene at grazing incidence
 
 Scene: geometry/micrograins.py; model: microsim/models/micrograin.py (``micrograin``, gaf =
 correlated | uncorrelated). Every run is one worker process of one thread
-(``runner.run(cfg, workers=1)``), so the benchmark can share a machine.
+(``trace(cfg, workers=1)``), so the benchmark can share a machine.
 
 (a) Figs. 7-8: conductor grains (eta + ik = 1.0152 + 6.6273i) on an absorbing base, theta_i =
     86 deg, phi_i = 0, single scattering (max_order = 1), one row per (tau0, beta_x, beta_y):
@@ -20,7 +20,7 @@ correlated | uncorrelated). Every run is one worker process of one thread
     albedo of every order (max_order = 0): mirror grains on a white Lambertian base (Fig. 17, the
     simulated albedo is 1, so the ratio is the energy the single-scattering model keeps) and
     conductor grains on a Lambertian base of albedo 0.5 (Fig. 18). The model's cell averages are
-    refined until the albedo is stable to 1e-4 (``compare.cell_averages``). Also printed: the worst
+    refined until the albedo is stable to 1e-4 (``cell_averages``). Also printed: the worst
     |z| of the model's albedo against the simulation's order-1 albedo (the model is exactly the
     single scattering of the scene, so this should stay within a few standard errors).
 (c) Convergence at grazing incidence (tau0 = 0.6, beta = 0.5, theta_i = 86 deg, conductor grains,
@@ -65,7 +65,8 @@ import numpy as np
 from microsim import config as config_module
 from microsim import models, tables
 from microsim.analysis import compare as compare_module
-from microsim.run import runner
+from microsim.analysis.averages import cell_averages
+from microsim.testing import trace
 
 OUT = Path(__file__).resolve().parent / "out"
 
@@ -118,7 +119,7 @@ def run_table(workdir: Path, name: str, scene: dict, material: dict, base: dict 
     if base is not None:
         raw["base"] = base
     cfg = config_module.validate(raw)
-    result = runner.run(cfg, workers=1, threads=1)
+    result = trace(cfg, workers=1, threads=1)
     path = tables.write(workdir / f"{name}.h5", result, cfg, overwrite=True)
     return tables.load(path), result.wall_time
 
@@ -271,9 +272,9 @@ def part_b(workdir: Path, scale: float) -> dict:
                 model = models.create("micrograin", tau0=tau0, beta=beta,
                                       **model_params(setting["material"], setting["base"]))
                 for t, wi in enumerate(table.wi):
-                    # every cell converged to its share of compare.ALBEDO_TOLERANCE of the albedo (the
+                    # every cell converged to its share of ALBEDO_TOLERANCE of the albedo (the
                     # narrow specular lobe at 86 deg on flat grains needs up to 128 x 128 nodes)
-                    averages, change = compare_module.cell_averages(model, table.sensor, wi,
+                    averages, change = cell_averages(model, table.sensor, wi,
                                                                     np.zeros(table.sensor.n_cells))
                     albedo_model = float(averages @ table.projected_solid_angle)
                     worst_quadrature = max(worst_quadrature, change)

@@ -1,5 +1,5 @@
 """The opposition peak of Boolean spheres in single scattering, resolved on retro rings and set
-beside the finite-size model (issue 12, deliverable 5, its third part).
+beside the finite-size model.
 
 Shadow hiding makes the order-1 peak: the light that reaches a sphere through a gap leaves
 through the same gap when it goes back the way it came. Its width is about r / l, 0.2 deg at
@@ -36,7 +36,7 @@ from microsim import config, models
 from microsim.core.orders import RESULT_ALL_ORDERS
 from microsim.models.radiative_transfer import single_scattering
 from microsim.physics.boolean_model import radius_over_free_path
-from microsim.run import runner
+from microsim.testing import trace
 
 PHIS = [0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.3, 0.45, 0.6]
 THETA_I_DEG = [0.0, 30.0]
@@ -72,7 +72,7 @@ def measure(phi, paths, seed):
         "run": {"paths": paths, "realizations": 32, "seed": seed, "max_order": 1},
     })
     start = time.perf_counter()
-    result = runner.run(cfg, threads=2)
+    result = trace(cfg, threads=2)
     seconds = time.perf_counter() - start
     model = models.create("boolean_spheres_single", albedo=ALBEDO, volume_fraction=phi) if phi <= MODEL_MAX_PHI else None
     lo, hi = result.sensor.retro_phase_bounds()

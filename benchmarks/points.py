@@ -21,7 +21,7 @@ estimates of the points:
 The model's figures come from its values at the same points by the same rules (so the
 interpolation's error is common to both); the model's half width found by root finding on the
 continuous curve is given beside it. The simulation's standard errors are jackknife errors over
-the realizations (runner.trace_realizations gives every realization's estimates): the points
+the realizations (microsim.testing.trace_realizations gives every realization's estimates): the points
 share their paths, so their errors are correlated, and H and the half width are nonlinear in
 them. z = (simulation - model) / se. Targets at phi = 0.005: |z| <= 2 for H and the half width,
 se(H) / H < 5 %. For contrast, the same paths binned on the retro rings: the relative standard
@@ -80,7 +80,8 @@ from microsim import config, models, tables
 from microsim.app import session
 from microsim.core.orders import ORDERS
 from microsim.physics.boolean_model import radius_over_free_path
-from microsim.run import runner
+from microsim.run.plan import Plan
+from microsim.testing import trace_realizations
 from microsim.tracer.sensor import Sensor
 
 THETA_I_DEG = 30.0
@@ -152,7 +153,7 @@ def peak(phi, paths, seed):
                       "retro_points_deg": (x * unit).tolist()},
            "run": {"paths": paths, "realizations": REALIZATIONS, "seed": seed}}
     start = time.perf_counter()
-    plan, est = runner.trace_realizations(config.validate(cfg))
+    plan, est = trace_realizations(config.validate(cfg))
     seconds = time.perf_counter() - start
     order1, every = est["brdf_points"][:, 0, 0], est["brdf_points"][:, 0, ORDERS]
     case = {"volume_fraction": phi, "r_over_l": r_over_l, "x": x.tolist(), "gamma_deg": (x * unit).tolist(),
@@ -166,7 +167,7 @@ def peak(phi, paths, seed):
                       "ratio_stderr": ratio_se.tolist(), "height": float(h), "height_stderr": float(h_se),
                       "hwhm_x": float(w), "hwhm_x_stderr": float(w_se)}
     rings = est["brdf_retro"][:, 0]  # (R, rows, rings)
-    case["rings"] = {"gamma_hi_deg": np.degrees(plan.build_sensor().retro_phase_bounds()[1]).tolist()}
+    case["rings"] = {"gamma_hi_deg": np.degrees(plan.sensor.retro_phase_bounds()[1]).tolist()}
     for name, row in (("order1", 0), ("all_orders", ORDERS)):
         mean = rings[:, row].mean(axis=0)
         se = rings[:, row].std(axis=0, ddof=1) / math.sqrt(REALIZATIONS)
@@ -212,9 +213,9 @@ def efficiency(scene_name, paths, seed, folder):
     base = {"scene": SCENES[scene_name], "material": {"kind": "lambert", "albedo": ALBEDO},
             "illumination": {"theta_i_deg": [THETA_I_DEG]}, "sensor": {"cells": CELLS},
             "run": {"paths": paths, "realizations": REALIZATIONS}}
-    plan = runner.Plan.from_config(config.validate({**base, "run": {**base["run"], "seed": seed}}))
+    plan = Plan.from_config(config.validate({**base, "run": {**base["run"], "seed": seed}}))
     wi = plan.incidence_direction(0)
-    sensor = plan.build_sensor()
+    sensor = plan.sensor
     asked = Sensor.build(1).with_points([d for _, d in DIRECTIONS if d is not None])
     wanted = np.vstack([asked.point_directions(wi, 0.0), wi])  # retro last, as in DIRECTIONS
     cells = sensor.lookup(wanted)

@@ -9,7 +9,7 @@ in reciprocity.
    against exact (both errors; the paths of the three share their random streams, so the noise
    is partly common and values near 1 or below mean "not distinguished"), and the albedo
    difference.
-2. Reciprocity. The anisotropic ridges height array of tests/test_periodic_tile_physics.py at 4,
+2. Reciprocity. The anisotropic ridges height array of microsim.testing.surfaces (tests/test_periodic_tile_physics.py) at 4,
    8, 16 and 32 samples a period, Lambertian (albedo 0.8), ring-centre incidences: the largest z of
    the 45 matching pairs and the mean relative asymmetry |f(a->b) - f(b->a)| / mean, flat and
    smooth. Smooth shading keeps energy exactly (the particle's weight is the material's, whatever
@@ -25,20 +25,17 @@ Results: docs/validation/benchmarks.md ("Smooth shading").
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from matching_cells import RECIPROCITY_CELLS, reciprocity_z, ring_incidences  # noqa: E402
-from report import save_figures  # noqa: E402
-from test_periodic_tile_physics import ridges  # noqa: E402
+from report import save_figures  # benchmarks/report.py, beside this script
 
 from microsim import config, tables
-from microsim.run import runner  # noqa: E402
+from microsim.testing import write_table
+from microsim.testing.reciprocity import RECIPROCITY_CELLS, reciprocity_z, ring_incidences
+from microsim.testing.surfaces import ridges
 
 INCIDENCES = [0.0, 60.0, 85.0]
 MATERIALS = {"mirror": {"kind": "mirror"}, "lambert": {"kind": "lambert", "albedo": 0.8}}
@@ -48,7 +45,7 @@ def run_table(data: dict, directory: Path) -> tables.Table:
     cfg = config.validate(data)
     path = directory / "table.h5"
     path.unlink(missing_ok=True)
-    tables.write(path, runner.run(cfg), cfg)
+    write_table(cfg, path)
     return tables.load(path)
 
 

@@ -1,4 +1,4 @@
-"""Speed against accuracy (issue 12, deliverable 6): error against a long reference run versus
+"""Speed against accuracy: error against a long reference run versus
 wall time, for Boolean spheres (phi = 0.3, albedo 0.8) and the Lambert-sphere medium.
 
 The reference is the default config traced with --reference-paths paths and
@@ -32,10 +32,10 @@ import numpy as np
 from report import OUT, save_figures
 
 from microsim import config
-from microsim.analysis import compare
+from microsim.analysis.selection import with_signal
 from microsim.core.orders import RESULT_ALL_ORDERS
 from microsim.geometry import poisson_spheres
-from microsim.run import runner
+from microsim.testing import trace
 
 THETA_I_DEG = [0.0, 60.0, 85.0]
 #: realizations of the reference run: its geometric spread is then small beside every variant's
@@ -71,7 +71,7 @@ def timed(cfg, repeats=1):
     results, seconds = [], []
     for _ in range(repeats):
         start = time.perf_counter()
-        results.append(runner.run(cfg, threads=2))
+        results.append(trace(cfg, threads=2))
         seconds.append(time.perf_counter() - start)
     return results[0], min(seconds)
 
@@ -88,7 +88,7 @@ def errors(result, reference):
         bias2 = max((x - y) ** 2 - se**2 - ye**2, 0.0) / y**2
         albedo.append(float(np.sqrt(se**2 / y**2 + bias2)))
         f, fe, g, ge = (v[RESULT_ALL_ORDERS] for v in (fa.mean, fa.stderr, fb.mean, fb.stderr))
-        ok = compare.with_signal(g, ge)
+        ok = with_signal(g, ge)
         noise2 = np.mean(fe[ok] ** 2 / g[ok] ** 2)
         cell_bias2 = max(np.mean(((f[ok] - g[ok]) ** 2 - fe[ok] ** 2 - ge[ok] ** 2) / g[ok] ** 2), 0.0)
         brdf.append(float(np.sqrt(noise2 + cell_bias2)))

@@ -1,4 +1,4 @@
-"""Do the sphere defaults model enough? Tile and depth biases against 2x and 4x (issue 12, item f).
+"""Do the sphere defaults model enough? Tile and depth biases against 2x and 4x.
 
 For each (volume fraction, albedo) the default config is run beside the same config with the
 tile, then the depth, doubled and quadrupled; the 4x run is the reference. Exact native spheres
@@ -9,8 +9,8 @@ Printed per case, incidence and choice: the albedo's relative bias against the 4
 with its standard error (independent runs, so the errors add in quadrature), and chi^2 per
 cell of the BRDF (400 cells) against the reference (about 1 when they agree); and the bound on
 the depth's bias that needs no reference: the slab loses only the light that crosses its bottom,
-so its albedo is low by at most energy/transmitted. The rule
-(issue 12, f): every bias below max(se/3, 0.3 %), se the relative standard error of the albedo
+so its albedo is low by at most energy/transmitted. The rule:
+every bias below max(se/3, 0.3 %), se the relative standard error of the albedo
 that a default run (1 M paths, 32 realizations, as in runs/) reaches. A bias counts as over
 the bound only if it is over it by more than two of its standard errors, and as settled below
 it only if bias + 2 se is under it; anything else is reported as not resolved.
@@ -34,7 +34,7 @@ from microsim import config as config_module
 from microsim.core.orders import RESULT_ALL_ORDERS
 from microsim.core.tally import TRANSMITTED
 from microsim.geometry import poisson_spheres
-from microsim.run import runner
+from microsim.testing import trace
 
 THETA_I_DEG = [0.0, 60.0, 85.0]
 CELLS = 400
@@ -60,7 +60,7 @@ def default_scene(phi, albedo):
 
 def measure(cfg, threads):
     start = time.perf_counter()
-    result = runner.run(cfg, threads=threads)
+    result = trace(cfg, threads=threads)
     seconds = time.perf_counter() - start
     return {
         "albedo": [float(a.mean[RESULT_ALL_ORDERS]) for a in result.albedo],

@@ -1,4 +1,4 @@
-"""The sphere-suspension study (issue 12, deliverable 5 and acceptance c): where point-scatterer
+"""The sphere-suspension study: where point-scatterer
 models of Boolean Lambertian spheres hold, and by how much they fail.
 
 For volume fractions PHIS, one multi-albedo run of explicit spheres (albedos ALBEDOS traced
@@ -45,9 +45,10 @@ from report import OUT, save_figures
 from microsim import config, models, tables
 from microsim.analysis import compare
 from microsim.analysis.fit import fit
+from microsim.analysis.selection import with_signal
 from microsim.models.radiative_transfer import single_scattering
 from microsim.physics.boolean_model import radius_over_free_path
-from microsim.run import runner
+from microsim.testing import trace_albedos
 from microsim.tracer.sensor import Sensor
 
 PHIS = [0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.3, 0.45, 0.6]
@@ -107,7 +108,7 @@ def ensure_tables(kind: str, phi: float, paths: int, seed: int, rerun: bool, alb
     TABLES.mkdir(parents=True, exist_ok=True)
     cfg = run_config(kind, phi, paths, seed, albedos)
     start = time.perf_counter()
-    results = runner.run_albedos(cfg, threads=2)
+    results = trace_albedos(cfg, threads=2)
     for result, target in zip(results, targets):
         tables.write(target, result, cfg, overwrite=True)
     seconds = time.perf_counter() - start
@@ -150,13 +151,13 @@ def explicit_vs_medium(spheres, medium, phi, c):
     for k, name in enumerate(ORDER_NAMES):
         rows = []
         for i in range(len(THETA_I_DEG)):
-            ok = compare.with_signal(f_s[k, i], e_s[k, i]) & compare.with_signal(f_m[k, i], e_m[k, i])
+            ok = with_signal(f_s[k, i], e_s[k, i]) & with_signal(f_m[k, i], e_m[k, i])
             rel = f_s[k, i, ok] / f_m[k, i, ok] - 1.0
             se = np.hypot(e_s[k, i, ok], e_m[k, i, ok])
             z = (f_s[k, i, ok] - f_m[k, i, ok]) / se
             far = ok & away[i]
             ratio = a_s[k, i] / a_m[k, i]
-            cok = compare.with_signal(cf_s[k, i], ce_s[k, i]) & compare.with_signal(cf_m[k, i], ce_m[k, i])
+            cok = with_signal(cf_s[k, i], ce_s[k, i]) & with_signal(cf_m[k, i], ce_m[k, i])
             crel = cf_s[k, i, cok] / cf_m[k, i, cok] - 1.0
             cse = np.hypot(ce_s[k, i, cok], ce_m[k, i, cok])
             rows.append({
@@ -187,7 +188,7 @@ def order1_model_excess(spheres, phi, c):
     out = []
     for i, wi in enumerate(spheres.wi):
         away = np.degrees(np.arccos(np.clip(spheres.direction @ wi, -1, 1))) > RETRO_EXCLUSION_DEG
-        ok = away & compare.with_signal(f_s[0, i], e_s[0, i])
+        ok = away & with_signal(f_s[0, i], e_s[0, i])
         w, weight = spheres.sensor.cell_quadrature(2, 2, np.flatnonzero(ok))
         wis = np.broadcast_to(wi, w.reshape(-1, 3).shape)
         finite = np.sum(model(wis, w.reshape(-1, 3)).reshape(weight.shape) * weight, axis=1)

@@ -19,10 +19,11 @@ from pathlib import Path
 
 from scipy.stats import chi2
 
-from microsim import config, tables
+from microsim import config
 from microsim.analysis import compare
+from microsim.core.table_noise import CHI2_OUTSIDE
 from microsim.models.tabulated import TabulatedBRDF
-from microsim.run import runner
+from microsim.testing import trace_table
 
 CONFIG = {
     "scene": {"kind": "poisson_spheres", "volume_fraction": 0.3},
@@ -35,7 +36,7 @@ CONFIG = {
 
 def table(directory: Path, seed: int, paths: int):
     cfg = config.validate({**CONFIG, "run": {**CONFIG["run"], "paths": paths, "seed": seed}})
-    return tables.load(tables.write(directory / f"seed{seed}.h5", runner.run(cfg), cfg))
+    return trace_table(cfg, directory / f"seed{seed}.h5")
 
 
 def main():
@@ -50,7 +51,7 @@ def main():
             overall = compare.compare(a, TabulatedBRDF(b)).metrics()
             low, high = overall["chi2_bounds"]
             n = len(a.theta_i)
-            independent = chi2.ppf(1 - compare.CHI2_OUTSIDE / 2, n) / n
+            independent = chi2.ppf(1 - CHI2_OUTSIDE / 2, n) / n
             outside["chi2"] += not low <= overall["chi2_per_cell"] <= high
             outside["albedo"] += overall["albedo_z2"] > overall["albedo_z2_bound"]
             outside["albedo_independent"] += overall["albedo_z2"] > independent

@@ -20,7 +20,7 @@ import time
 import numpy as np
 
 from microsim import models
-from microsim.analysis.compare import CellRule, cell_averages
+from microsim.analysis.averages import CellRule, cell_averages
 from microsim.config import full_brdf
 from microsim.core.frames import direction
 from microsim.models.tabulated import CellValues, TabulatedBRDF

@@ -26,7 +26,7 @@ import numpy as np
 from microsim import config as config_module
 from microsim import geometry
 from microsim.core.orders import RESULT_ALL_ORDERS
-from microsim.run import runner
+from microsim.testing import trace
 
 OUT = Path(__file__).resolve().parent / "out"
 EXACT = "exact"
@@ -45,7 +45,7 @@ def run_model(phi: float, model, paths: int, realizations: int, threads: int):
         "run": {"paths": paths, "realizations": realizations, "seed": 4},
     })
     start = time.perf_counter()
-    result = runner.run(cfg, threads=threads)
+    result = trace(cfg, threads=threads)
     return result, time.perf_counter() - start
 
 

@@ -6,7 +6,7 @@ runs/gaussian_alpha08_lambert.toml: its first realization and incidence, --scene
 measured side by side in one run, best of --repeats:
 
 1. old backend (``embreex``: one embreex.run per segment of every live path) on the spheres
-   tessellated at the former default (mesh error 0.01, icosphere level 2): one thread traces
+   tessellated at mesh error 0.01 (icosphere level 2): one thread traces
    --paths paths, recording every ray batch handed to Embree; the batches are replayed through
    embreex alone: raw embreex rays/s, the tracer's segments/s and paths/s, their ratio, and the
    tracer's time outside Embree per segment (from the same trace, free of run-to-run drift);
@@ -68,7 +68,8 @@ import numpy as np
 from microsim import config as config_module
 from microsim.core.tally import SEGMENTS
 from microsim.physics.rng import geometry_rng, stream_key
-from microsim.run import runner
+from microsim.run.plan import Plan
+from microsim.testing import trace
 from microsim.tracer.estimators import DEFAULT, build
 from microsim.tracer.integrators.direct import DirectBackend
 from microsim.tracer.integrators.embreex import EmbreexBackend, embree_scene
@@ -115,7 +116,7 @@ def realization(cfg, **scene_keys):
     if not tessellated(cfg):
         scene_keys = {}  # nothing to tessellate: its triangles as they are
     cfg = cfg.model_copy(update={"scene": cfg.scene.model_copy(update=scene_keys)})
-    plan = runner.Plan.from_config(cfg)
+    plan = Plan.from_config(cfg)
     return cfg, plan, plan.generator.generate(plan.scene, cfg, geometry_rng(cfg.run.seed, 0))
 
 
@@ -227,7 +228,7 @@ def measure_runs(cfg, run_paths: int, repeats: int) -> dict:
     for _ in range(repeats):
         for name, (c, workers, threads) in ways.items():
             start = time.perf_counter()
-            runner.run(c, workers=workers, threads=threads)
+            trace(c, workers=workers, threads=threads)
             best[name] = min(best[name], time.perf_counter() - start)
     paths = cfg.run.paths * len(cfg.illumination.theta_i_deg)
     return {f"run_paths_per_s_{name}": paths / seconds for name, seconds in best.items()}

@@ -1,4 +1,4 @@
-"""One billion paths in V-cavities (issue 11 f), and the fastest exact way to intersect a groove.
+"""One billion paths in V-cavities, and the fastest exact way to intersect a groove.
 
 The setting of Meneveaux et al. 2015, Sec. 3.3 ("one billion light paths and a
 sensor containing 3240 cells"): Lambertian facets of albedo 0.8, Beckmann roughness 0.5, one
@@ -15,7 +15,7 @@ incidence (theta_i = 45 deg), all orders.
    - the same logged rays through :func:`microsim.tracer.integrators.vcavity.meet_analytic` alone (the
      canonical groove, depth 1): raw analytic rays/s, the cost of the intersection itself;
    - each intersector's segments/s over raw Embree's rays/s on those same rays.
-2. The billion: ``runner.run`` on --workers processes of one thread, --billion-paths paths in 64
+2. The billion: ``microsim.testing.trace`` on --workers processes of one thread, --billion-paths paths in 64
    realizations; the table goes to benchmarks/out/vcavities_billion.h5. Wall time (builds and
    compilation included), paths/s, segments/s, albedo and its standard error.
 
@@ -38,7 +38,7 @@ from microsim import config, geometry, tables
 from microsim.analysis.plots import incidence_plane_cells
 from microsim.core.tally import SEGMENTS
 from microsim.physics.rng import stream_key
-from microsim.run import runner
+from microsim.testing import trace
 from microsim.tracer import embree
 from microsim.tracer.integrators import vcavity
 from microsim.tracer.integrators.embreex import embree_scene
@@ -132,7 +132,7 @@ def billion(paths: int, workers: int) -> tuple[dict, Path]:
     """Figure 2 of the module docstring."""
     cfg = config.validate(settings(paths))
     start = time.perf_counter()
-    result = runner.run(cfg, workers=workers)
+    result = trace(cfg, workers=workers)
     wall = time.perf_counter() - start
     OUT.mkdir(exist_ok=True)
     path = tables.write(OUT / "vcavities_billion.h5", result, cfg, overwrite=True)

@@ -33,7 +33,7 @@ from report import OUT, save_figures
 from microsim import config, models, tables
 from microsim.analysis import compare
 from microsim.analysis.plots import incidence_plane_cells, polar_cells
-from microsim.run import runner
+from microsim.testing import write_table
 
 ROOT = Path(__file__).resolve().parent.parent
 MATERIALS = ("lambert", "interfaced_lambert", "conductor")
@@ -48,7 +48,7 @@ def shipped_table(material: str, workers: int, reuse: bool) -> tables.Table:
     path = OUT / f"vcavities_{material}.h5"
     if not (reuse and path.exists()):
         cfg = config.load(ROOT / "runs" / f"vcavities_{material}.toml")
-        tables.write(path, runner.run(cfg, workers=workers), cfg, overwrite=True)
+        write_table(cfg, path, workers=workers, overwrite=True)
     return tables.load(path)
 
 
@@ -118,7 +118,7 @@ def oren_nayar_study(paths: int, workers: int) -> list[dict]:
             "run": {"paths": paths, "realizations": 32, "seed": 1},
         })
         path = OUT / "vcavities_oren_nayar.h5"
-        tables.write(path, runner.run(cfg, workers=workers), cfg, overwrite=True)
+        write_table(cfg, path, workers=workers, overwrite=True)
         table = tables.load(path)
         row = {"sigma": sigma}
         for label, terms, order in (("L1 vs order 1", "direct", "1"), ("L1+L2 vs orders 1+2", "full", "1+2"),

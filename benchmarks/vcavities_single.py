@@ -1,27 +1,21 @@
 """The figures behind tests/test_vcavities.py items a and b: V-cavity single scattering against
 the microfacet models with the Torrance-Sparrow G, case by case.
 
-The cases and configs are the tests' own (imported from tests/test_vcavities.py): conductor
+The cases and configs are the tests' own (microsim.testing.vcavities, which tests/test_vcavities.py imports): conductor
 facets (0.2 + 3.9i), Beckmann and GGX at roughness 0.1, 0.3, 0.7, one anisotropic Beckmann field
 at phi_i = 0 and 90 deg, dielectric-reflection facets (an index-1.5 interface over a black body),
 Lambertian and interfaced Lambertian facets; and, for contrast, the Smith G at 85 deg. For each
 incidence: the cells with signal (table > 3 standard errors), the mean z^2 per cell with its
-two-sided bounds (tests/stat_bounds.py; the lower one is vacuous below about 40 cells), and the
+two-sided bounds (microsim.testing.bounds; the lower one is vacuous below about 40 cells), and the
 median |sim / model - 1|. About a minute on one core.
 """
 
-import sys
-from pathlib import Path
-
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
-
-import test_vcavities as cases  # noqa: E402
-from stat_bounds import chi2_bound, chi2_lower_bound  # noqa: E402
-
 from microsim import models
-from microsim.run import runner  # noqa: E402
+from microsim.testing import trace
+from microsim.testing import vcavities as cases
+from microsim.testing.bounds import chi2_bound, chi2_lower_bound
 
 
 def report(label, result, model):
@@ -37,24 +31,24 @@ def report(label, result, model):
 def main():
     for distribution in ("beckmann", "ggx"):
         for a in (0.1, 0.3, 0.7):
-            result = runner.run(cases.vcavity_config(cases.CONDUCTOR, distribution, (a, a)))
+            result = trace(cases.vcavity_config(cases.CONDUCTOR, distribution, (a, a)))
             report(f"conductor {distribution} {a}", result, models.create(
                 "microfacet", distribution=distribution, roughness=a, gaf="torrance_sparrow", eta=0.2, k=3.9))
-    result = runner.run(cases.vcavity_config(cases.CONDUCTOR, "beckmann", (0.2, 0.6), theta=[45.0, 45.0, 85.0, 85.0],
+    result = trace(cases.vcavity_config(cases.CONDUCTOR, "beckmann", (0.2, 0.6), theta=[45.0, 45.0, 85.0, 85.0],
                                              phi=[0.0, 90.0, 0.0, 90.0]))
     report("conductor beckmann 0.2 x 0.6", result, models.create(
         "microfacet", distribution="beckmann", roughness_x=0.2, roughness_y=0.6, gaf="torrance_sparrow", eta=0.2, k=3.9))
     for distribution in ("beckmann", "ggx"):
-        result = runner.run(cases.vcavity_config(cases.DIELECTRIC, distribution, (0.3, 0.3)))
+        result = trace(cases.vcavity_config(cases.DIELECTRIC, distribution, (0.3, 0.3)))
         report(f"dielectric {distribution} 0.3", result, models.create(
             "microfacet", distribution=distribution, roughness=0.3, gaf="torrance_sparrow", eta=1.5))
     for material, eta, distribution, roughness in cases.DIFFUSE_FACETS:
-        result = runner.run(cases.vcavity_config(material, distribution, roughness, theta=cases.DIFFUSE_THETA,
+        result = trace(cases.vcavity_config(material, distribution, roughness, theta=cases.DIFFUSE_THETA,
                                                  phi=cases.DIFFUSE_PHI, paths=cases.DIFFUSE_PATHS))
         report(f"{material['kind']} {distribution} {roughness}", result, models.create(
             "interfaced_lambert", albedo=0.7, eta=eta, distribution=distribution, roughness_x=roughness[0],
             roughness_y=roughness[1], gaf="torrance_sparrow"))
-    result = runner.run(cases.vcavity_config(cases.CONDUCTOR, "beckmann", (0.7, 0.7), theta=[85.0]))
+    result = trace(cases.vcavity_config(cases.CONDUCTOR, "beckmann", (0.7, 0.7), theta=[85.0]))
     report("for contrast, the Smith G: conductor beckmann 0.7", result, models.create(
         "microfacet", distribution="beckmann", roughness=0.7, gaf="smith", eta=0.2, k=3.9))
 

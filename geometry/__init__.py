@@ -11,6 +11,12 @@ about how much memory one realization takes once built for Embree (the runner re
 that cannot fit); and
 ``generate(resolved, config, rng)``, one random realization in the form its integrator takes
 (for "surface", a ``microsim.tracer.scene.Scene`` assembled with ``SceneBuilder``).
+And ``EXAMPLE``: a small whole run config of the kind (a dictionary as a TOML config parses:
+``scene``, ``material``, ``illumination``, ``sensor`` and ``run``, a few thousand paths, a fixed
+seed; a file it names is relative to the repository's root), from which the conformance test
+of every kind (tests/test_scene_kinds.py: the white furnace, reciprocity, thread identity, a bad
+key refused in one line) and the CLI fuzzer (microsim.testing.fuzzing) start, so that a new
+kind is tested and fuzzed with no change to either.
 Optionally ``SIZE``, the advice the memory refusal gives on a scene's size
 (default: lower the scene's tile or depth).
 """

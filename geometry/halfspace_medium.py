@@ -29,6 +29,12 @@ from microsim.tracer.integrators.medium import Medium
 
 KIND = "halfspace_medium"
 INTEGRATOR = "medium"
+#: a small whole run config of this kind, fixed seed (the generator protocol, geometry/__init__.py): what
+#: the conformance test of every kind (tests/test_scene_kinds.py) and the CLI fuzzer start from
+EXAMPLE = {"scene": {"kind": "halfspace_medium", "phase": "isotropic"},
+           "material": {"kind": "lambert", "albedo": 0.5},
+           "illumination": {"theta_i_deg": [0.0, 60.0]}, "sensor": {"cells": 24},
+           "run": {"paths": 4000, "realizations": 4, "seed": 1}}
 class Config(Section):
     kind: Literal["halfspace_medium"]
     phase: Literal[tuple(PHASES)] = Field("lambert_sphere", description="phase function of the point scatterers")

@@ -45,7 +45,15 @@ from microsim.tracer.scene import Scene
 
 KIND = "heightfield"
 INTEGRATOR = "surface"
-#: what sets the scene's size, for the memory refusal (microsim.run.runner.check_memory)
+#: a small whole run config of this kind, fixed seed (the generator protocol, geometry/__init__.py): what
+#: the conformance test of every kind (tests/test_scene_kinds.py) and the CLI fuzzer start from
+#: (its file: relative to the repository's root, a config of runs/; microsim.testing.scenes.example resolves it)
+EXAMPLE = {"scene": {"kind": "heightfield", "path": "runs/heightfields/dunes.npy", "pixel": 1.0,
+                     "height_scale": 0.15},
+           "material": {"kind": "lambert", "albedo": 0.4},
+           "illumination": {"theta_i_deg": [0.0, 60.0]}, "sensor": {"cells": 24},
+           "run": {"paths": 4000, "realizations": 4, "seed": 1}}
+#: what sets the scene's size, for the memory refusal (microsim.run.memory.check_memory)
 SIZE = "take fewer samples (a smaller array in scene.path; a shorter scene.tile or a larger scene.pixel)"
 #: how a .npy and a .npz (a zip file) begin
 NPY_MAGIC, NPZ_MAGIC = b"\x93NUMPY", b"PK\x03\x04"
@@ -200,7 +208,7 @@ def load(config) -> tuple[Tile, str]:
 def _read(config) -> tuple[Tile, str]:
     """The file's tile. A periodic grid's triangles are a surface over the tile by construction
     (their seams match, they face up, none is degenerate): the mesh checks have nothing to find,
-    and are not run (their edge matching took a minute at 2048^2 samples)."""
+    and are not run (their edge matching takes about a minute at 2048^2 samples)."""
     h, digest = heights(config)
     pixel = file_pixel(config.scene)
     periodic_tile.require_period(f"scene.pixel = {pixel:g}", len(h) * pixel)

@@ -33,7 +33,14 @@ from microsim.tracer.scene import Scene
 
 KIND = "mesh"
 INTEGRATOR = "surface"
-#: what sets the scene's size, for the memory refusal (microsim.run.runner.check_memory)
+#: a small whole run config of this kind, fixed seed (the generator protocol, geometry/__init__.py): what
+#: the conformance test of every kind (tests/test_scene_kinds.py) and the CLI fuzzer start from
+#: (its file: relative to the repository's root, a config of runs/; microsim.testing.scenes.example resolves it)
+EXAMPLE = {"scene": {"kind": "mesh", "path": "runs/meshes/weave.ply"},
+           "material": {"kind": "lambert", "albedo": 0.7},
+           "illumination": {"theta_i_deg": [0.0, 60.0]}, "sensor": {"cells": 24},
+           "run": {"paths": 4000, "realizations": 4, "seed": 1}}
+#: what sets the scene's size, for the memory refusal (microsim.run.memory.check_memory)
 SIZE = "take fewer triangles in scene.path"
 #: the generator protocol's, as every periodic tile has them
 for_backend, scene_bytes = periodic_tile.for_backend, periodic_tile.scene_bytes

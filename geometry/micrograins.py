@@ -84,6 +84,12 @@ from microsim.tracer.shapes import Shapes
 
 KIND = "micrograins"
 INTEGRATOR = "surface"
+#: a small whole run config of this kind, fixed seed (the generator protocol, geometry/__init__.py): what
+#: the conformance test of every kind (tests/test_scene_kinds.py) and the CLI fuzzer start from
+EXAMPLE = {"scene": {"kind": "micrograins", "tau0": 0.5, "beta": 1.0, "tile": 7.0},
+           "material": {"kind": "conductor", "eta": 1.0152, "k": 6.6273}, "base": {"kind": "lambert", "albedo": 0.5},
+           "illumination": {"theta_i_deg": [0.0, 60.0]}, "sensor": {"cells": 24},
+           "run": {"paths": 4000, "realizations": 4, "seed": 1}}
 #: the tile keeps single-scattering paths up to this angle from meeting periodic images, TILE_FACTOR
 #: times over (module doc)
 GRAZING_DEG = 86.0

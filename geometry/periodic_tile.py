@@ -255,9 +255,9 @@ STEEP_AREA = 5.0
 def steepness_note(resolved: dict) -> str | None:
     """Why a resolved tile (:func:`summary`'s keys) will trace slowly, before it does: a surface of
     more than STEEP_AREA times its tile's area is a maze of steep walls, between which paths
-    scatter many times before they leave, each crossing many of the grid's cells (a heightfield of
-    integer heights times 100 at pixel 0.1 traced 60 times slower than a gentle one); None for
-    a gentler one."""
+    scatter many times before they leave, each crossing many of the grid's cells (how much
+    slower: docs/developer/performance.md, 'Gaussian heightfields: triangles or a grid walk');
+    None for a gentler one."""
     mean_cosine = resolved.get("mean_cosine")
     if mean_cosine is None or mean_cosine <= 0.0 or 1.0 / mean_cosine < STEEP_AREA:
         return None

@@ -10,6 +10,11 @@ from microsim.tracer.scene import Scene, SceneBuilder
 
 KIND = "plane"
 INTEGRATOR = "surface"
+#: a small whole run config of this kind, fixed seed (the generator protocol, geometry/__init__.py): what
+#: the conformance test of every kind (tests/test_scene_kinds.py) and the CLI fuzzer start from
+EXAMPLE = {"scene": {"kind": "plane"}, "material": {"kind": "lambert", "albedo": 0.5},
+           "illumination": {"theta_i_deg": [0.0, 60.0]}, "sensor": {"cells": 24},
+           "run": {"paths": 4000, "realizations": 4, "seed": 1}}
 #: paths start and leave this fraction of the tile above the plane
 TOP_HEIGHT = 1e-2
 

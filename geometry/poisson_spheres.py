@@ -58,7 +58,7 @@ Defaults (every value used is recorded in the table's scene/ attrs):
   paths do not lower that spread). Beyond 64 r the slab of a dilute or bright medium (up to 40
   free paths deep) would hold millions of spheres.
 
-The rule that the defaults meet (issue 12, item f; ``benchmarks/sphere_defaults.py``): the bias
+The rule that the defaults meet (checked by ``benchmarks/sphere_defaults.py``): the bias
 of the albedo against a tile, or a depth, 4 times the default stays below 0.3 % (which is more
 than a third of the standard error a default run of 1 M paths reaches). The exact spheres have no
 tessellation bias. The depth's bias is bounded without a reference: the slab differs from the
@@ -90,6 +90,12 @@ from microsim.tracer.shapes import Shapes
 
 KIND = "poisson_spheres"
 INTEGRATOR = "surface"
+#: a small whole run config of this kind, fixed seed (the generator protocol, geometry/__init__.py): what
+#: the conformance test of every kind (tests/test_scene_kinds.py) and the CLI fuzzer start from
+EXAMPLE = {"scene": {"kind": "poisson_spheres", "volume_fraction": 0.3, "tile": 8.0, "depth": 4.0},
+           "material": {"kind": "lambert", "albedo": 0.8},
+           "illumination": {"theta_i_deg": [0.0, 60.0]}, "sensor": {"cells": 24},
+           "run": {"paths": 4000, "realizations": 4, "seed": 1}}
 TRANSMISSION_TARGET = 1e-3
 MAX_OPTICAL_DEPTH = 40.0
 #: the default tile period, in radii (see the module doc)
@@ -99,7 +105,7 @@ TILE = 64.0
 TILE_FREE_PATHS = 3.0
 GRAZING_DEG = 85.0
 MAX_SUBDIVISIONS = 6
-#: the icosphere budget that stands in for exact spheres on the embreex backend (the former default)
+#: the icosphere budget that stands in for exact spheres on the embreex backend
 FALLBACK_MESH_ERROR = 0.01
 #: the slab's top and bottom lie this far (radii) beyond the highest and lowest mesh point
 SLAB_MARGIN = 1e-3
@@ -118,8 +124,8 @@ class Config(Section):
 
 
 #: a realization expects at least this many spheres (or grains): a Poisson count of 10 is 0 with
-#: probability exp(-10) = 4.5e-5. A tile of 0.22 grains left 3 of 4 realizations empty, and an
-#: albedo of 0.119 +- 0.119 (issue 24)
+#: probability exp(-10) = 4.5e-5. A tile that expects 0.22 leaves 4 realizations of 5 empty, and
+#: gives an albedo whose standard error is as large as the albedo
 MIN_EXPECTED_OBJECTS = 10
 
 

@@ -51,7 +51,7 @@ What the grooves do (tests/test_vcavities.py):
 Every resolved value is stored in the table's ``scene/`` attrs, with ``layout`` and ``intersector``.
 
 (measurements: docs/developer/performance.md, sections 'V-cavities: the order-2 caustic' and
-'One walk, estimators and dispatch (issue 25), 2026-12-02' for the intersectors' speeds)
+'One walk, estimators and dispatch' for the intersectors' speeds)
 """
 
 from __future__ import annotations
@@ -70,6 +70,12 @@ from microsim.tracer.materials import row_length
 
 KIND = "vcavities"
 INTEGRATOR = "vcavity"
+#: a small whole run config of this kind, fixed seed (the generator protocol, geometry/__init__.py): what
+#: the conformance test of every kind (tests/test_scene_kinds.py) and the CLI fuzzer start from
+EXAMPLE = {"scene": {"kind": "vcavities", "distribution": "beckmann", "roughness": 0.5},
+           "material": {"kind": "lambert", "albedo": 0.5},
+           "illumination": {"theta_i_deg": [0.0, 60.0]}, "sensor": {"cells": 24},
+           "run": {"paths": 4000, "realizations": 4, "seed": 1}}
 INTERSECTORS = ("analytic", "embree")
 LAYOUT = "one infinitely long groove per path, its facet m drawn from D(m)(m.n)"
 

@@ -1,5 +1,6 @@
-"""Shared helpers of the physics tests: run a config dictionary end to end, read the table back;
-and the rule that a test of a million paths or more is marked ``slow``, checked on every test.
+"""The fixtures of the suite: ``simulate``, a config dictionary run end to end and its table read
+back (:mod:`microsim.testing.tables`); and the rule that a test of a million paths or more is
+marked ``slow``, checked on every test.
 
 The paths a test traces are counted where every run hands its units to an executor
 (``runner.EXECUTORS``: paths per realization for every unit it hands back traced, in this
@@ -12,8 +13,8 @@ Runs in subprocesses, and tracers a test calls itself (``executors.trace_units``
 import pytest
 
 from microsim import tables
-from microsim.config import validate
 from microsim.run import runner
+from microsim.testing.tables import trace_table
 
 #: paths from which a test is marked slow (the README: ``-m "not slow"`` leaves them out)
 SLOW_PATHS = 1_000_000
@@ -60,14 +61,11 @@ def pytest_runtest_call(item):
 
 @pytest.fixture
 def simulate(tmp_path):
-    """``simulate(dict, workers=1) -> Table``: validate, trace, write the HDF5 table, load it."""
+    """``simulate(dict, workers=1) -> Table``: validate, trace, write the HDF5 table, load it
+    (:func:`microsim.testing.tables.trace_table`), in the test's temporary directory."""
     counter = iter(range(1000))
 
     def run(data: dict, workers: int = 1) -> tables.Table:
-        cfg = validate(data)
-        result = runner.run(cfg, workers=workers)
-        path = tmp_path / f"table{next(counter)}.h5"
-        tables.write(path, result, cfg)
-        return tables.load(path)
+        return trace_table(data, tmp_path / f"table{next(counter)}.h5", workers=workers)
 
     return run

@@ -1,9 +1,9 @@
-"""Every albedo from one run (issue 12, item d; docs/conventions.md §4): paths traced once at the
+"""Every albedo from one run (docs/conventions.md §4): paths traced once at the
 largest albedo, each exit tallied for every listed albedo with its weight times (c_j / c_max)^k.
 
 A run of several albedos is judged against separate runs of one albedo each, made with another
 seed (independent): the mean over cells of z^2 = (a - b)^2 / (se_a^2 + se_b^2) within the
-two-sided bounds of ``stat_bounds`` (conservative for a difference of two tables). The table of
+two-sided bounds of ``microsim.testing.bounds`` (conservative for a difference of two tables). The table of
 the largest albedo is the single run's, bit for bit, with the same seed: its weights are scaled
 by 1.
 """
@@ -12,11 +12,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from refusals import assert_run_refused, small_config
-from stat_bounds import chi2_bound, chi2_lower_bound
 
 from microsim import config
-from microsim.run import runner
+from microsim.run.plan import PlanError
+from microsim.testing import trace, trace_albedos
+from microsim.testing.bounds import chi2_bound, chi2_lower_bound
+from microsim.testing.refusals import assert_run_refused, small_config
 
 ALBEDOS = [0.3, 0.6, 0.9, 0.99]
 REALIZATIONS = 16
@@ -35,10 +36,10 @@ def settings(scene, albedo, seed, paths=200_000):
 @pytest.mark.parametrize("scene", sorted(SCENES))
 @pytest.mark.slow
 def test_four_albedos_from_one_run_equal_four_runs(scene):
-    together = runner.run_albedos(settings(scene, ALBEDOS, seed=1))
+    together = trace_albedos(settings(scene, ALBEDOS, seed=1))
     assert [r.albedo_value for r in together] == ALBEDOS
     for albedo, joint in zip(ALBEDOS, together):
-        alone = runner.run(settings(scene, albedo, seed=2))
+        alone = trace(settings(scene, albedo, seed=2))
         for i in range(2):
             a, b = joint.brdf[i], alone.brdf[i]
             se2 = a.stderr[4] ** 2 + b.stderr[4] ** 2
@@ -51,25 +52,25 @@ def test_four_albedos_from_one_run_equal_four_runs(scene):
 
 
 def test_the_largest_albedo_is_the_single_run_bit_for_bit():
-    joint = runner.run_albedos(settings("medium", [0.5, 0.9], seed=3, paths=50_000))[1]
-    alone = runner.run(settings("medium", 0.9, seed=3, paths=50_000))
+    joint = trace_albedos(settings("medium", [0.5, 0.9], seed=3, paths=50_000))[1]
+    alone = trace(settings("medium", 0.9, seed=3, paths=50_000))
     for a, b in zip(joint.brdf + joint.albedo + joint.energy, alone.brdf + alone.albedo + alone.energy):
         assert np.array_equal(a.total, b.total) and np.array_equal(a.squares, b.squares)
 
 
 def test_the_check_sees_a_wrong_scale():
     """Power: the table of albedo 0.6 from the joint run against a separate run of 0.58 fails."""
-    joint = runner.run_albedos(settings("medium", ALBEDOS, seed=1))[1]
-    alone = runner.run(settings("medium", 0.58, seed=2))
+    joint = trace_albedos(settings("medium", ALBEDOS, seed=1))[1]
+    alone = trace(settings("medium", 0.58, seed=2))
     a, b = joint.brdf[0], alone.brdf[0]
     z2 = np.mean((a.mean[4] - b.mean[4]) ** 2 / (a.stderr[4] ** 2 + b.stderr[4] ** 2))
     assert z2 > chi2_bound(100, REALIZATIONS)
 
 
 def test_run_refuses_a_list_and_run_albedos_takes_one():
-    with pytest.raises(runner.PlanError, match="material.albedo"):
-        runner.run(settings("medium", [0.5, 0.9], seed=1, paths=100))
-    assert len(runner.run_albedos(settings("medium", 0.5, seed=1, paths=100))) == 1
+    with pytest.raises(PlanError, match="material.albedo"):
+        trace(settings("medium", [0.5, 0.9], seed=1, paths=100))
+    assert len(trace_albedos(settings("medium", 0.5, seed=1, paths=100))) == 1
 
 
 @pytest.mark.parametrize("base,key", [('kind = "lambert"\nalbedo = 0.5', "material.albedo"),
@@ -94,7 +95,7 @@ def test_the_cli_writes_one_table_per_albedo(tmp_path, capsys):
 
 @pytest.mark.parametrize("force", [[], ["--force"]])
 def test_albedos_that_print_alike_name_distinct_tables(tmp_path, capsys, force):
-    """Issue 24, defect 3: 0.1 and 0.1000001 both named t_albedo0.1.h5; one table was lost."""
+    """Albedos that print alike (0.1 and 0.1000001) name distinct tables: neither is lost."""
     from microsim import tables
     from microsim.cli import main
 

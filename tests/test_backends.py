@@ -14,7 +14,8 @@ import pytest
 
 from microsim import config, tables
 from microsim.cli import main
-from microsim.run import runner
+from microsim.run.plan import Plan, PlanError
+from microsim.testing import trace
 from microsim.tracer import embree
 from microsim.tracer.integrators import scheduler
 
@@ -31,8 +32,8 @@ def spheres(backend: str, paths: int = 24_000, **scene) -> dict:
 
 
 def test_direct_backend_traces_the_same_paths_as_embreex_on_triangles():
-    old = runner.run(config.validate(spheres("embreex", subdivisions=1)))
-    new = runner.run(config.validate(spheres("direct", subdivisions=1)))
+    old = trace(config.validate(spheres("embreex", subdivisions=1)))
+    new = trace(config.validate(spheres("direct", subdivisions=1)))
     assert np.array_equal(old.counts, new.counts) and old.counts[:, 1].sum() > 0  # segments, inside hits, kills
     for a, b in zip(old.brdf + old.albedo + old.energy, new.brdf + new.albedo + new.energy):
         assert np.allclose(a.mean, b.mean, rtol=1e-12, atol=1e-15)
@@ -41,9 +42,9 @@ def test_direct_backend_traces_the_same_paths_as_embreex_on_triangles():
 def test_tables_are_bit_identical_for_any_thread_count():
     paths = 2 * scheduler.WAVE_CHUNKS_PER_THREAD * scheduler.CHUNK_PATHS + 3 * scheduler.CHUNK_PATHS + 17  # 3 waves of one thread
     cfg = config.validate(spheres("direct", paths=paths))  # and a partial chunk
-    one = runner.run(cfg, threads=1)
+    one = trace(cfg, threads=1)
     for threads in (2, 3):  # 3: shares of a wave that differ in size
-        other = runner.run(cfg, threads=threads)
+        other = trace(cfg, threads=threads)
         assert np.array_equal(one.counts, other.counts)
         for a, b in zip(one.brdf + one.albedo + one.energy, other.brdf + other.albedo + other.energy):
             assert a.total.tobytes() == b.total.tobytes() and a.squares.tobytes() == b.squares.tobytes()
@@ -56,15 +57,15 @@ def unavailable(*args):
 def test_auto_falls_back_to_embreex_when_the_binding_cannot_load(monkeypatch):
     monkeypatch.setattr(embree, "load", unavailable)
     monkeypatch.setattr(embree, "available", unavailable)
-    plan = runner.Plan.from_config(config.validate(spheres("auto", subdivisions=1)), threads=2)
+    plan = Plan.from_config(config.validate(spheres("auto", subdivisions=1)), threads=2)
     assert plan.backend == "embreex" and plan.threads == 1
     assert plan.backend_note == ("the direct backend is unavailable (no library here); "
                                  "one thread (the embreex backend has no threads)")
-    exact = runner.Plan.from_config(config.validate(spheres("auto")), workers=2)
+    exact = Plan.from_config(config.validate(spheres("auto")), workers=2)
     assert exact.scene["sphere_model"] == "icosphere" and exact.scene["max_mesh_error"] <= 0.01
     assert "exact spheres traced as icospheres within mesh_error 0.01" in exact.backend_note
-    with pytest.raises(runner.PlanError, match="^run.backend = 'direct': no library here$"):
-        runner.Plan.from_config(config.validate(spheres("direct", subdivisions=1)))
+    with pytest.raises(PlanError, match="^run.backend = 'direct': no library here$"):
+        Plan.from_config(config.validate(spheres("direct", subdivisions=1)))
 
 
 def test_a_fallback_run_says_why_in_the_table_and_on_the_terminal(monkeypatch, tmp_path, capsys):

@@ -1,4 +1,4 @@
-"""`microsim run` end to end: determinism across workers (acceptance e), bad input (acceptance f)."""
+"""`microsim run` end to end: determinism across workers, bad input."""
 
 import os
 import subprocess
@@ -10,26 +10,9 @@ import h5py
 import pytest
 
 from microsim.cli import main
-
-SPHERES = """
-name = "small"
-[scene]
-kind = "poisson_spheres"
-volume_fraction = 0.3
-tile = 16.0
-depth = 8.0
-[material]
-kind = "lambert"
-albedo = 0.8
-[illumination]
-theta_i_deg = [0.0, 60.0]
-[sensor]
-cells = 200
-[run]
-paths = 20_000
-realizations = 4
-seed = 5
-"""
+from microsim.testing import trace
+from microsim.testing.configs import SPHERES
+from microsim.testing.refusals import assert_run_refused
 
 PROVENANCE = {"created_utc", "wall_time_s"}
 
@@ -65,7 +48,8 @@ def test_tables_are_bit_identical_for_any_number_of_workers_and_threads(tmp_path
 
 @pytest.mark.parametrize("how", ["same path", "symlink", "sweep"])
 def test_the_table_never_replaces_its_config(tmp_path, capsys, how):
-    """Issue 24, defect 2: `run c.toml --out c.toml --force` wrote the table over the config."""
+    """`run c.toml --out c.toml`, with or without --force, through a symlink or as a sweep's
+    point, is refused in one line: a table never replaces its config."""
     text = SPHERES.replace("paths = 20_000", "paths = 200")
     if how == "sweep":
         text = text.replace('name = "small"', 'name = "small"\n[sweep]\n"material.albedo" = [0.5]')
@@ -117,7 +101,7 @@ def edit(old, new):
 
 BAD_CONFIGS = {
     "volume fraction out of range": (edit("volume_fraction = 0.3", "volume_fraction = 1.5"), "scene.volume_fraction"),
-    "unknown scene key": (edit("depth = 8.0", "depth = 8.0\nradius = 2.0"), "scene.radius"),
+    # an unknown [scene] key: tests/test_scene_kinds.py, for every scene kind
     "unknown scene kind": (edit('kind = "poisson_spheres"', 'kind = "cubes"'), "scene.kind"),
     "unknown material kind": (edit('kind = "lambert"', 'kind = "velvet"'), "material.kind"),
     "wrong type": (edit("volume_fraction = 0.3", 'volume_fraction = "dense"'), "scene.volume_fraction"),
@@ -135,7 +119,7 @@ BAD_CONFIGS = {
     "name with a control character": (edit('name = "small"', 'name = "sm\\u0000all"'), "name"),
     "base under a plane": (lambda text: text.replace('kind = "poisson_spheres"\nvolume_fraction = 0.3\ntile = 16.0\ndepth = 8.0',
                                                      'kind = "plane"') + '\n[base]\nkind = "absorber"\n', "base"),
-    # issue 24, defect 10: configs that can only give meaningless tables
+    # configs that can only give meaningless tables
     "fewer paths than realizations": (edit("paths = 20_000", "paths = 3"), "run.paths = 3: fewer than run.realizations"),
     "realizations of no path": (edit("realizations = 4", "realizations = 100000"), "run.paths = 20,000: fewer than"),
     "a slab of 4 spheres": (edit("tile = 16.0\ndepth = 8.0", "tile = 4.0\ndepth = 3.0"),
@@ -149,15 +133,7 @@ BAD_CONFIGS = {
 @pytest.mark.parametrize("case", sorted(BAD_CONFIGS))
 def test_bad_config_gives_one_line_naming_the_key_and_exit_2(case, tmp_path, capsys):
     change, key = BAD_CONFIGS[case]
-    config = tmp_path / "bad.toml"
-    config.write_text(change(SPHERES))
-    out = tmp_path / "bad.h5"
-    assert main(["run", str(config), "--out", str(out)]) == 2
-    captured = capsys.readouterr()
-    lines = captured.err.strip().splitlines()
-    assert len(lines) == 1 and key in lines[0] and "Traceback" not in captured.err
-    assert captured.out == ""
-    assert not out.exists() and list(tmp_path.iterdir()) == [config]
+    assert_run_refused(change(SPHERES), key, tmp_path, capsys)
 
 
 def test_a_config_that_is_not_utf8_gives_one_line(tmp_path, capsys):
@@ -172,7 +148,7 @@ def test_a_config_that_is_not_utf8_gives_one_line(tmp_path, capsys):
 
 @pytest.mark.parametrize("name", ["../escaped", "/tmp/absolute", "sub/dir"])
 def test_the_default_table_is_named_from_the_config_file_in_the_current_directory(name, tmp_path, monkeypatch):
-    """``name`` is a label stored in the table, never a path (issue 9, defect 3)."""
+    """``name`` is a label stored in the table, never a path."""
     here = tmp_path / "here"
     here.mkdir()
     config = tmp_path / "small.toml"
@@ -225,21 +201,21 @@ def test_shipped_configs_validate():
 
 
 def test_a_table_that_appears_while_the_run_traces_is_not_replaced(tmp_path, capsys, monkeypatch):
-    """The overwrite check holds at the final rename, atomically, not only at start-up (issue 9,
-    defect 4): the file that appeared is kept, and so is the run's table, under another name."""
+    """The overwrite check holds at the final rename, atomically, not only at start-up: the file
+    that appeared is kept, and so is the run's table, under another name."""
     from microsim.run import runner
 
     config = tmp_path / "small.toml"
     config.write_text(SPHERES.replace("paths = 20_000", "paths = 400"))
     out = tmp_path / "t.h5"
-    real_run = runner.trace
+    real_run = runner.Run.trace
 
     def run_while_someone_writes_out(*args, **kwargs):
         results = real_run(*args, **kwargs)
         out.write_bytes(b"written meanwhile")
         return results
 
-    monkeypatch.setattr(runner, "trace", run_while_someone_writes_out)
+    monkeypatch.setattr(runner.Run, "trace", run_while_someone_writes_out)
     assert main(["run", str(config), "--out", str(out)]) == 2
     err = capsys.readouterr().err.splitlines()
     kept = tmp_path / f"t.{os.getpid()}.h5"
@@ -254,12 +230,11 @@ def test_a_table_that_appears_while_the_run_traces_is_not_replaced(tmp_path, cap
 def test_two_runs_to_the_same_new_path_do_not_both_succeed(tmp_path):
     from microsim import config as config_module
     from microsim import tables
-    from microsim.run import runner
 
     path = tmp_path / "c.toml"
     path.write_text(SPHERES.replace("paths = 20_000", "paths = 400"))
     cfg = config_module.load(path)
-    result = runner.run(cfg)
+    result = trace(cfg)
     out = tmp_path / "t.h5"
     tables.write(out, result, cfg)
     first = out.read_bytes()
@@ -298,7 +273,8 @@ def test_a_failing_worker_ends_the_run_in_one_line(failure, line, tmp_path, caps
 
 @pytest.mark.parametrize("count", [0, 257, 1_000_000])
 def test_a_list_of_the_wrong_length_names_the_limit_and_quotes_an_excerpt(count, tmp_path, capsys):
-    """Issue 24, defect 11: a million incidences were refused without naming 256, echoing 5 MB."""
+    """A list of the wrong length (none, 257, a million incidences) is refused in one short line
+    that names the limit, 256, and the count, not with the list echoed."""
     config = tmp_path / "bad.toml"
     config.write_text(SPHERES.replace("theta_i_deg = [0.0, 60.0]", f"theta_i_deg = {[10.0] * count}"))
     assert main(["run", str(config), "--out", str(tmp_path / "bad.h5")]) == 2
@@ -313,9 +289,8 @@ def test_a_list_of_the_wrong_length_names_the_limit_and_quotes_an_excerpt(count,
                          ids=["--help", "run --help", "compare --help", "no config", "no --model", "--workers 0",
                               "export --help", "render --help", "export --format obj"])
 def test_help_and_argument_errors_load_none_of_the_work(argv):
-    """Issue 24, defect 14: every command paid 3.5-4.3 s of start-up, --help included, because
-    importing the command line loaded numba; help and usage errors need none of the work's
-    modules (measured with a clock in the closing note: 0.15 s)."""
+    """Help and usage errors load none of the work's modules (numba, h5py, pydantic, scipy, the
+    generators, trimesh): importing numba alone costs seconds of start-up."""
     code = ("import sys\nfrom microsim.cli import main\nstatus = main(sys.argv[1:])\n"
             "print(status, sorted(m for m in ('numba', 'h5py', 'pydantic', 'scipy', 'geometry', 'trimesh') "
             "if m in sys.modules))")

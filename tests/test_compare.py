@@ -1,4 +1,4 @@
-"""`microsim compare` and `microsim models` (issue 3, acceptance e and f)."""
+"""`microsim compare` and `microsim models`."""
 
 import json
 
@@ -6,25 +6,12 @@ import numpy as np
 import pytest
 
 from microsim import models
-from microsim.analysis.compare import cell_averages
+from microsim.analysis.averages import cell_averages
 from microsim.cli import main
+from microsim.testing import trace_table, write_table
+from microsim.testing.refusals import assert_refused
+from microsim.testing.tables import write_plane_table
 from microsim.tracer.sensor import Sensor
-
-
-def write_plane_table(directory, paths: int):
-    from microsim import config, tables
-    from microsim.run import runner
-
-    cfg = config.validate({
-        "scene": {"kind": "plane"},
-        "material": {"kind": "lambert", "albedo": 0.5},
-        "illumination": {"theta_i_deg": [0.0, 50.0]},
-        "sensor": {"cells": 200},
-        "run": {"paths": paths, "realizations": 64, "seed": 9},
-    })
-    path = directory / "plane.h5"
-    tables.write(path, runner.run(cfg), cfg)
-    return path
 
 
 @pytest.fixture(scope="module")
@@ -109,10 +96,7 @@ def test_models_lists_every_model(capsys):
     (["--model", "lambert", "--param", "albedo=0.5", "--order", "7"], "--order"),
 ])
 def test_bad_compare_input_gives_one_line_and_exit_2(small_table, argv, key, capsys):
-    assert main(["compare", str(small_table), *argv]) == 2
-    captured = capsys.readouterr()
-    lines = captured.err.strip().splitlines()
-    assert len(lines) == 1 and key in lines[0] and "Traceback" not in captured.err and captured.out == ""
+    assert_refused(["compare", small_table, *argv], capsys, key)
 
 
 def test_compare_on_a_missing_or_foreign_file(tmp_path, capsys):
@@ -127,7 +111,7 @@ def test_cells_without_standard_error_are_refined_until_the_albedo_converges():
     """A narrow specular lobe (conductor grains, tau0 = 0.95, beta = 0.2, theta_i = 86 deg) on
     cells that no path reached (standard error 0): the model's albedo from the refined cell
     averages equals a 256 x 256 rule on every cell to ALBEDO_TOLERANCE."""
-    from microsim.analysis.compare import ALBEDO_TOLERANCE
+    from microsim.analysis.averages import ALBEDO_TOLERANCE
     from microsim.core.frames import direction
 
     model = models.create("micrograin", tau0=0.95, beta=0.2, material="conductor", eta=1.0152, k=6.6273)
@@ -142,16 +126,15 @@ def test_cells_without_standard_error_are_refined_until_the_albedo_converges():
 
 
 def test_figures_of_every_incidence_and_order_keep_their_own_names(tmp_path, capsys):
-    """Issue 24, defect 4: two incidences of one theta_i, or two orders, into one directory wrote
-    over each other's figures."""
-    from microsim import config, tables
-    from microsim.run import runner
+    """Two incidences of one theta_i, or two orders, into one directory write figures of their
+    own names, none over another."""
+    from microsim import config
 
     cfg = config.validate({"scene": {"kind": "plane"}, "material": {"kind": "lambert", "albedo": 0.5},
                            "illumination": {"theta_i_deg": [60.0, 60.0], "phi_i_deg": [0.0, 90.0]},
                            "sensor": {"cells": 50}, "run": {"paths": 6400, "realizations": 4, "seed": 1}})
     path = tmp_path / "t.h5"
-    tables.write(path, runner.run(cfg), cfg)
+    write_table(cfg, path)
     for order in ("all", "1"):
         assert main(["compare", str(path), "--model", "lambert", "--param", "albedo=0.5", "--order", order,
                      "--plot", str(tmp_path / "figs")]) == 0
@@ -162,7 +145,7 @@ def test_figures_of_every_incidence_and_order_keep_their_own_names(tmp_path, cap
 @pytest.mark.parametrize("command", [["compare", "--param", "albedo=0.5"], ["fit", "--free", "albedo"]])
 def test_figures_to_a_place_that_cannot_take_them_are_refused_before_the_work(small_table, tmp_path, capsys,
                                                                                command, monkeypatch):
-    """Issue 24, defect 5: a --plot under a file ended in a traceback after the whole comparison."""
+    """A --plot under a file is refused in one line before the comparison is worked out."""
     from microsim.analysis import compare as compare_module
 
     (tmp_path / "file").write_text("")
@@ -175,15 +158,15 @@ def test_figures_to_a_place_that_cannot_take_them_are_refused_before_the_work(sm
 
 
 def test_a_table_without_signal_is_refused_in_one_line(tmp_path, capsys):
-    """Issue 24, defect 9: 2000 paths over 200 000 cells printed NaN and exited 0."""
+    """A table without a cell with signal (2000 paths over 200 000 cells) is refused in one line,
+    exit 2, never compared into NaN."""
     path = tmp_path / "sparse.h5"
-    from microsim import config, tables
-    from microsim.run import runner
+    from microsim import config
 
     cfg = config.validate({"scene": {"kind": "plane"}, "material": {"kind": "lambert", "albedo": 0.5},
                            "illumination": {"theta_i_deg": [0.0]}, "sensor": {"cells": 200_000},
                            "run": {"paths": 2000, "realizations": 4, "seed": 1}})
-    tables.write(path, runner.run(cfg), cfg)
+    write_table(cfg, path)
     assert main(["compare", str(path), "--model", "lambert", "--param", "albedo=0.5"]) == 2
     captured = capsys.readouterr()
     lines = captured.err.strip().splitlines()
@@ -193,8 +176,7 @@ def test_a_table_without_signal_is_refused_in_one_line(tmp_path, capsys):
 def medium_table(directory, seed: int, albedo: float = 0.9):
     """An isotropic half space (exact model: rte_isotropic) at 31 paths a cell: 25 000 paths an
     incidence over 800 cells, 32 realizations."""
-    from microsim import config, tables
-    from microsim.run import runner
+    from microsim import config
 
     cfg = config.validate({
         "scene": {"kind": "halfspace_medium", "phase": "isotropic"},
@@ -203,9 +185,7 @@ def medium_table(directory, seed: int, albedo: float = 0.9):
         "sensor": {"cells": 800},
         "run": {"paths": 25_000, "realizations": 32, "seed": seed},
     })
-    path = directory / f"medium{seed}.h5"
-    tables.write(path, runner.run(cfg), cfg)
-    return tables.load(path)
+    return trace_table(cfg, directory / f"medium{seed}.h5")
 
 
 @pytest.fixture(scope="module")
@@ -216,10 +196,10 @@ def media(tmp_path_factory):
 
 
 def test_chi_square_per_cell_of_an_exact_model_is_1_within_its_bounds_at_few_paths_a_cell(media):
-    """Issue 24, defect 15: chi-square per cell with the variance the model predicts. Each
+    """Chi-square per cell with the variance the model predicts. Each
     incidence's value falls outside its 99 % bounds with probability 0.01 (4 of 36 or more:
     probability 5e-4), and their mean is 1 within 4 standard deviations of a mean of 36. With
-    each cell's own error (mean z^2) 9 of 36 fall outside here."""
+    each cell's own error (mean z^2) 9 of 36 fall outside."""
     from microsim.analysis import compare as compare_module
 
     rows = [row for table in media

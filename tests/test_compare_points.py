@@ -5,7 +5,7 @@ directions) and --retro (the retro rings), against exact BRDFs.
   (mu_i + mu_o) exactly, at every point and averaged over every ring; the exact model is
   consistent, one of another albedo is not, and a fit finds the albedo.
 - A Lambertian plane: every point is exactly albedo / pi with no spread, so the model must equal
-  it (to compare.EXACT_POINT), and a fit is exact.
+  it (to EXACT_POINT), and a fit is exact.
 - The points of an incidence share their paths: with their covariance in the table, compare
   judges them by Hotelling's test and fit weighs them by it (generalized least squares). On the
   half space at order 1 (16 realizations, 7 and 8 points): the exact model is consistent, an
@@ -19,7 +19,6 @@ directions) and --retro (the retro rings), against exact BRDFs.
 from __future__ import annotations
 
 import json
-import math
 import re
 
 import numpy as np
@@ -28,9 +27,13 @@ from scipy import stats
 
 from microsim import tables
 from microsim.analysis import compare, fit
+from microsim.analysis.averages import QUADRATURE_TOLERANCE, ring_averages
+from microsim.analysis.compare_points import retro_sensor
 from microsim.app import session
 from microsim.cli import main
+from microsim.core.table_noise import CHI2_OUTSIDE
 from microsim.models.radiative_transfer import single_scattering
+from microsim.testing.refusals import assert_refused
 
 ALBEDO = 0.9
 #: a user's model of the medium traced to order 1: path.py:Single on the command line
@@ -190,13 +193,13 @@ def test_hotelling_judges_the_points_where_the_table_holds_their_covariance(corr
         assert rest == r - k and 5 <= k <= compared
         low, high = row["hotelling_bounds"]
         assert [low, high] == pytest.approx(stats.f.ppf([0.005, 0.995], k, r - k), rel=1e-12)
-        assert low <= row["hotelling_f"] <= high and row["p_value"] >= compare.CHI2_OUTSIDE, row
+        assert low <= row["hotelling_f"] <= high and row["p_value"] >= CHI2_OUTSIDE, row
         assert row["dropped_max_ratio"] <= 1 and row["consistent"], row
         assert row["chi2_per_point"] > 0 and row["chi2_bounds"][1] == pytest.approx(7.879, abs=1e-3)  # descriptive
     # the two points of theta_o = 60 at 60 degrees are exactly proportional: a direction dropped
     assert result["per_incidence"][1]["points_dropped"] >= 1
     overall = result["overall"]
-    assert overall["bonferroni_level"] == pytest.approx(compare.CHI2_OUTSIDE / 2)
+    assert overall["bonferroni_level"] == pytest.approx(CHI2_OUTSIDE / 2)
     assert overall["p_value_min"] == pytest.approx(min(row["p_value"] for row in result["per_incidence"]))
     assert overall["consistent"] and overall["incidences_chi2_1dof"] == 0
 
@@ -232,7 +235,7 @@ def test_an_incidence_with_as_many_points_as_realizations_falls_back(tmp_path, c
     assert result["points_statistic"] == "hotelling" and result["overall"]["incidences_chi2_1dof"] == 2
     for row in result["per_incidence"]:
         assert row["points_statistic"] == "chi2_1dof" and "as many as the realizations" in row["points_statistic_note"]
-        assert "hotelling_f" not in row and row["consistent"] == (row["p_value"] >= compare.CHI2_OUTSIDE)
+        assert "hotelling_f" not in row and row["consistent"] == (row["p_value"] >= CHI2_OUTSIDE)
     fitted = fit.fit(tables.load(path), single, ["albedo"], {"albedo": 0.5}, "1", on="points").as_dict()
     assert fitted["fit_points_weights"] == "bounding" and "4 realizations" in fitted["fit_points_weights_note"]
 
@@ -278,7 +281,7 @@ def test_the_exact_model_is_consistent_on_the_retro_rings_and_another_albedo_is_
     assert exact["on"] == "retro"
     for row in [*exact["per_incidence"], exact["overall"]]:
         assert row["consistent"] and within(row, "ring") and row["rings_with_signal"] >= 5, row
-    assert exact["quadrature_max_change_in_stderr"] <= compare.QUADRATURE_TOLERANCE
+    assert exact["quadrature_max_change_in_stderr"] <= QUADRATURE_TOLERANCE
     off = run_json(capsys, "compare", path, "--model", spec, "--order", "1", "--retro", "--param", "albedo=0.8")
     assert not off["overall"]["consistent"] and off["overall"]["chi2_per_ring"] > off["overall"]["chi2_bounds"][1]
 
@@ -289,9 +292,9 @@ def test_ring_averages_are_the_cos_weighted_mean_over_each_ring(medium):
     horizon only where the last ring touches it)."""
     path, _ = medium
     table = tables.load(path)
-    sensor = compare.retro_sensor(table)
+    sensor = retro_sensor(table)
     wi = table.wi[1]
-    averages, _, _ = compare.ring_averages(single, sensor, wi, np.full(sensor.retro_rings, 1e-6))
+    averages, _, _ = ring_averages(single, sensor, wi, np.full(sensor.retro_rings, 1e-6))
     rng = np.random.default_rng(4)
     v = rng.normal(size=(2_000_000, 3))
     v /= np.linalg.norm(v, axis=1)[:, None]
@@ -392,8 +395,5 @@ def test_bad_input_gives_one_line_and_exit_2(request, tmp_path, capsys, command,
     path = path[0] if isinstance(path, tuple) else path
     free = ["--free", "albedo"] if command == "fit" else []
     argv = [str(tmp_path / a) if a == "figures" else a for a in argv]
-    assert main([command, str(path), "--model", "lambert", "--param", "albedo=0.5", *free, *argv]) == 2
-    captured = capsys.readouterr()
-    lines = captured.err.strip().splitlines()
-    assert len(lines) == 1 and all(w in lines[0] for w in words), captured.err
-    assert "Traceback" not in captured.err and captured.out == "" and not (tmp_path / "figures").exists()
+    assert_refused([command, path, "--model", "lambert", "--param", "albedo=0.5", *free, *argv], capsys, *words)
+    assert not (tmp_path / "figures").exists()

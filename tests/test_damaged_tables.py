@@ -1,4 +1,4 @@
-"""Damaged or partial tables (issue 9, defect 6): checksums on every dataset, presence, shape and
+"""Damaged or partial tables: checksums on every dataset, presence, shape and
 NaN checks on loading, and one line naming what is wrong from `microsim compare`."""
 
 import hashlib
@@ -12,7 +12,8 @@ import pytest
 from microsim import config, tables
 from microsim.analysis import compare
 from microsim.cli import main
-from microsim.run import runner
+from microsim.testing import write_table
+from microsim.testing.refusals import assert_refused
 
 COMPARE = ["--model", "lambert", "--param", "albedo=0.5", "--order", "1"]
 
@@ -28,7 +29,7 @@ def good_table(tmp_path_factory):
         "run": {"paths": 2000, "realizations": 2, "seed": 1},
     })
     path = tmp_path_factory.mktemp("good") / "plane.h5"
-    return tables.write(path, runner.run(cfg), cfg)
+    return write_table(cfg, path)
 
 
 def damaged_copy(good_table, directory, damage):
@@ -42,12 +43,9 @@ def damaged_copy(good_table, directory, damage):
 
 def compare_error(path, capsys) -> str:
     """The one line `microsim compare` prints on stderr for a bad table (exit status 2)."""
-    assert main(["compare", str(path), *COMPARE]) == 2
-    captured = capsys.readouterr()
-    lines = captured.err.strip().splitlines()
-    assert len(lines) == 1 and captured.out == "", captured
-    assert lines[0].startswith(f"microsim: error: TABLE.h5: {path}: ")
-    return lines[0]
+    line = assert_refused(["compare", path, *COMPARE], capsys)
+    assert line.startswith(f"microsim: error: TABLE.h5: {path}: ")
+    return line
 
 
 def replace_brdf_by_wrong_shape(h5):
@@ -85,7 +83,7 @@ def move_a_cell_between_rings(h5):
     (lambda h5: h5.__delitem__("albedo_order"), "albedo_order is missing"),
     (replace_brdf_by_wrong_shape, "brdf has shape (2, 7), expected (2, {cells}) (incidences x cells)"),
     (write_nan_into_a_cell, "brdf holds NaN in 1 of {values} values"),
-    # issue 24, defect 12: values no run gives, edited in by another program
+    # values no run gives, edited in by another program
     (edit("incidence/theta", lambda theta: theta.__setitem__(1, 10.0)),
      "incidence/theta holds 10 rad (572.958 deg), outside [0, pi/2)"),
     (edit("brdf_stderr", lambda e: e.__setitem__((0, 2), -e[0, 2])),
@@ -184,7 +182,8 @@ def test_nan_from_the_model_is_an_error_naming_it(good_table):
 
 
 def test_a_foreign_hdf5_file_is_not_a_microsim_table(tmp_path, capsys):
-    """Issue 24, defect 12: it was reported as "scene is missing"."""
+    """An HDF5 file that no run wrote is refused as not a microsim table, not as a table that
+    lacks its scene."""
     path = tmp_path / "foreign.h5"
     with h5py.File(path, "w") as h5:
         h5["data"] = np.arange(3.0)

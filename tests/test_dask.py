@@ -1,4 +1,4 @@
-"""The Dask executor (issue 13, deliverable 3, acceptance c): on a LocalCluster of 2 workers the
+"""The Dask executor: on a LocalCluster of 2 workers the
 table is bit-identical to --workers 2; with one worker killed mid-run it still is, and only the
 tasks that worker held are traced again."""
 
@@ -13,13 +13,15 @@ from collections import Counter, defaultdict
 import pytest
 from distributed import LocalCluster
 from distributed.diagnostics.plugin import SchedulerPlugin
-from test_resume import RUN, wait_for_units
-from test_sweep import same_table
 
 from microsim import config as config_module
 from microsim import tables
 from microsim.cli import main
-from microsim.run import executors, runner, unit_store
+from microsim.run import executors, unit_store
+from microsim.run.plan import Plan
+from microsim.testing import trace
+from microsim.testing.interruptions import RUN, wait_for_units
+from microsim.testing.tables import same_table
 
 SMALL = RUN.replace("paths = 2_560_000", "paths = 640_000")
 
@@ -67,7 +69,7 @@ def test_a_worker_killed_mid_run_costs_only_its_tasks(tmp_path):
                 killed.append((pids[victim.address], victim.address))
                 os.kill(killed[0][0], signal.SIGKILL)
 
-        result = runner.run(cfg, workers=2, progress=kill_one_worker, executor="dask",
+        result = trace(cfg, workers=2, progress=kill_one_worker, executor="dask",
                             scheduler=cluster.scheduler_address)
         starts = Counter(t.key for t in cluster.scheduler.transition_log if t.finish == "processing")
 
@@ -83,7 +85,7 @@ def test_a_worker_killed_mid_run_costs_only_its_tasks(tmp_path):
     retried = {key for key, count in starts.items() if count > 1}
     held = assignments.sent[killed[0][1]]  # what it was tracing, and what was sent to it before it was seen dead
     assert retried and lost <= held and retried <= held, (retried, held)
-    assert sorted(emitted) == sorted(runner.Plan.from_config(cfg).units)  # every unit once
+    assert sorted(emitted) == sorted(Plan.from_config(cfg).units)  # every unit once
     assert same_table(tmp_path / "local.h5", tmp_path / "dask.h5")
 
 

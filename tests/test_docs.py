@@ -1,7 +1,7 @@
 """The documentation: the site builds with ``mkdocs build --strict`` (no broken link, anchor or
 reference), names every CLI option, config key, model and table dataset, and its getting-started
 commands run as written (at fewer paths); the README's links resolve inside the repository, and
-no file of the project refers to a path outside it."""
+no file of the project refers to a path outside it, nor to its own issues by number."""
 
 import html
 import os
@@ -124,6 +124,48 @@ def test_no_file_of_the_project_refers_to_a_path_outside_it():
     assert found == []
 
 
+#: a reference to this project's history by number: the word issue or defect, a number
+HISTORY_TAG = re.compile(r"\b(issue|defect)s? ?#?[0-9]+", re.I)
+#: what may precede a tag that cites another project's tracker: its name (a few words before,
+#: within the sentence) or a URL
+EXTERNAL = re.compile(r"\b(numba|embreex?|mitsuba|drjit|llvm|trimesh|h5py|scipy|pydantic|numpy|dask|hypothesis|"
+                      r"mkdocs|xarray|click|rich)\b('s)?[^.;:]{0,30}$|https?://\S*$", re.I)
+#: where the project states its claims (CHANGELOG.md holds the history, and is not scanned)
+CLAIM_PLACES = ("microsim/", "geometry/", "tests/", "benchmarks/", "docs/", "runs/", "README.md")
+
+
+def history_tags(text: str) -> list[tuple[int, str]]:
+    """(line number, line) of each line that refers to this project's issues or defects by number."""
+    return [(number, line) for number, line in enumerate(text.splitlines(), 1)
+            if any(not EXTERNAL.search(line[:tag.start()]) for tag in HISTORY_TAG.finditer(line))]
+
+
+def test_no_file_tells_history_by_issue_number():
+    """Code, tests, benchmarks and docs state claims, not history: no "issue N" or "defect N" of
+    this project (another project's, cited by its name or a URL, is allowed)."""
+    files = subprocess.run(["git", "ls-files", "--cached", "--others", "--exclude-standard", *CLAIM_PLACES],
+                           cwd=ROOT, capture_output=True, text=True, check=True).stdout.split()
+    found = []
+    for name in files:
+        path = ROOT / name
+        if path.suffix in {".png", ".h5", ".npz", ".npy", ".ply"} or not path.is_file():
+            continue
+        found += [f"{name}:{number}: {line.strip()[:80]}"
+                  for number, line in history_tags(path.read_text(errors="replace"))]
+    assert len(files) > 100
+    assert found == []
+
+
+def test_the_history_check_sees_a_tag_and_allows_another_project_s():
+    """The check itself (the tags assembled, so that this file holds none)."""
+    tag = "Iss" + "ue 24, def" + "ect 14"
+    assert history_tags(f'"""{tag}: a run compiled twice."""\n# see is' + "sue #7") == [
+        (1, f'"""{tag}: a run compiled twice."""'), (2, "# see is" + "sue #7")]
+    assert history_tags("(numba is" + "sue #8989: quadratic copies)") == []
+    assert history_tags("https://github.com/numba/numba/pull/1 is" + "sue 3") == []
+    assert history_tags("numba compiles. Is" + "sue 3") != []
+
+
 def unnamed_modules(page: str) -> list[str]:
     """Modules of microsim/ and geometry/ that the architecture page does not name: a module by
     its file name (``name.py``), a package by its folder (``name/``)."""
@@ -143,3 +185,25 @@ def test_the_architecture_page_names_every_module_and_the_readme_every_layer():
     readme = (ROOT / "README.md").read_text()
     layers = sorted(p.parent.name for p in (ROOT / "microsim").glob("*/__init__.py"))
     assert [layer for layer in layers if f"`{layer}/`" not in readme] == []
+
+
+def unmapped_modules(page: str) -> list[str]:
+    """Modules of microsim/ and geometry/ without a row in the testing page's module-to-test map,
+    and test files the map names that tests/ does not hold."""
+    section = page.split("\n## Module-to-test map\n", 1)[1].split("\n## ", 1)[0]
+    rows = re.findall(r"^\| `([\w/.]+\.py)` \|(.*)\|$", section, flags=re.M)
+    mapped = {module for module, _ in rows}
+    missing = [str(path.relative_to(ROOT)) for folder in ("microsim", "geometry")
+               for path in sorted((ROOT / folder).rglob("*.py")) if str(path.relative_to(ROOT)) not in mapped]
+    named = {name for _, tests in rows for name in re.findall(r"`((?:test_\w+|conftest|toy_estimator)\.py)`", tests)}
+    return missing + sorted(f"tests/{name}" for name in named if not (ROOT / "tests" / name).is_file())
+
+
+def test_the_testing_page_maps_every_module_to_its_tests():
+    page = (ROOT / "docs" / "developer" / "testing.md").read_text()
+    assert unmapped_modules(page) == []
+    assert unmapped_modules(page.replace("| `microsim/physics/fresnel.py` |", "| fresnel |")) == \
+        ["microsim/physics/fresnel.py"]
+    assert unmapped_modules(page.replace("`test_sensor.py`", "`test_no_such_file.py`")) == \
+        ["tests/test_no_such_file.py"]
+

@@ -1,4 +1,4 @@
-"""Acceptance b and energy accounting: a white closed scene returns all its energy; roulette is unbiased."""
+"""Energy accounting: a white closed scene returns all its energy; roulette is unbiased."""
 
 import numpy as np
 
@@ -70,9 +70,9 @@ def test_max_order_truncates_and_reports_the_rest(simulate):
 
 
 def test_the_run_line_names_energy_lost_beyond_the_albedo_s_error_and_paths_rounded_up(tmp_path, capsys):
-    """Issue 24, defects 16 and 10: albedo-1 spheres printed 0.979 with nothing said of the 2.1 %
-    transmitted through the slab; paths were rounded up to a multiple of the realizations
-    silently. A deep slab of the same spheres, every path asked traced, says neither."""
+    """The run's line names the energy lost beyond the albedo's error (albedo-1 spheres at 0.979:
+    the 2.1 % transmitted through the slab) and paths rounded up to a multiple of the
+    realizations. A deep slab of the same spheres, every path asked traced, says neither."""
     import tomllib
 
     from microsim import tables

@@ -1,11 +1,11 @@
-"""Calibration of the standard errors (issue 9, item 7): error bars are checked from below too.
+"""Calibration of the standard errors: error bars are checked from below too.
 
 The other physics tests bound |z| from above only, so standard errors inflated 4-16 x pass
 them. Here the spread of z over many cells must match its reference distribution, in a
 two-sided interval: errors too large fail as surely as errors too small.
 
 Reference distribution. A table's standard error is the spread of R per-realization estimates
-over sqrt(R) (microsim.run.runner.Estimate: sample variance with R - 1 in the denominator, over R).
+over sqrt(R) (microsim.run.reduction.Estimate: sample variance with R - 1 in the denominator, over R).
 If the per-realization estimates are normal, z = (mean - exact) / stderr is Student-t with
 nu = R - 1 degrees of freedom, not normal: its variance is nu / (nu - 2) (1.15 for R = 16), and
 its sample variance over n cells is NOT chi2(n - 1) / (n - 1) (the t's heavy tails widen it). For
@@ -70,8 +70,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from microsim import config, tables
-from microsim.run import runner
+from microsim import tables
+from microsim.testing import trace_table
 
 pytestmark = pytest.mark.slow  # 1.3 M paths on the plane, 2 x 0.8 M and 2 x 0.6 M on spheres
 
@@ -124,10 +124,7 @@ def calibration(value, stderr, reference, reference_stderr, dof: float) -> Calib
 
 def traced(tmp_path_factory, name: str, data: dict) -> tables.Table:
     """Validate, run on 2 workers, write the HDF5 table and read it back (what users get)."""
-    cfg = config.validate(data)
-    path = tmp_path_factory.mktemp(name) / f"{name}.h5"
-    tables.write(path, runner.run(cfg, workers=2), cfg)
-    return tables.load(path)
+    return trace_table(data, tmp_path_factory.mktemp(name) / f"{name}.h5", workers=2)
 
 
 # ---- the plane: exactly albedo / pi in every cell ----

@@ -15,7 +15,9 @@ import numpy as np
 
 from microsim import tables
 from microsim.config import validate
-from microsim.run import runner, unit_store
+from microsim.run import unit_store
+from microsim.run.plan import Plan
+from microsim.testing import trace, trace_albedos, write_table
 from microsim.tracer import estimators
 
 HERE = Path(__file__).resolve().parent
@@ -33,7 +35,7 @@ def check_a_registered_estimator_writes_its_dataset(tmp_path):
     of paths leaving after k interactions is the albedo of order k, which the exit binning counts
     by weight: the two estimators agree to rounding, in every realization (stderr too)."""
     cfg = vcavities(1.0)
-    path = tables.write(tmp_path / "t.h5", runner.run(cfg), cfg)
+    path = write_table(cfg, tmp_path / "t.h5")
     table = tables.load(path).arrays
     fraction, error = table["exit_fraction_order"], table["exit_fraction_order_stderr"]
     assert fraction.shape == (2, 4)
@@ -44,20 +46,20 @@ def check_a_registered_estimator_writes_its_dataset(tmp_path):
 
 def check_an_estimator_counts_each_albedo_of_a_run_of_several(tmp_path):
     """Counts do not depend on the albedo: every table of a run of several holds the same."""
-    first, second = runner.run_albedos(vcavities([0.5, 1.0], paths=4000))
+    first, second = trace_albedos(vcavities([0.5, 1.0], paths=4000))
     a, b = (np.stack([e.mean for e in r.estimates["exit_fraction_order"]]) for r in (first, second))
     assert np.array_equal(a, b) and np.allclose(a.sum(axis=1), 1.0, rtol=1e-12)
 
 
 def check_the_unit_store_keeps_and_gives_back_an_estimators_fields(tmp_path):
     cfg = vcavities(0.9, paths=4000)
-    plan = runner.Plan.from_config(cfg)
+    plan = Plan.from_config(cfg)
     store = unit_store.UnitStore.open(tmp_path / "t.h5.partial", plan, resume=False)
-    traced = runner.run(cfg, store=store)
+    traced = trace(cfg, store=store)
     saved = store.load(plan.units[0])[0]
     # the points' record is every run's (empty without points: one kernel for runs with and without)
     assert [type(record).__name__ for record in saved.estimates] == ["ExitBinsTally", "PointsTally", "ExitCountsTally"]
-    resumed = runner.run(cfg, store=store)  # every unit from the store
+    resumed = trace(cfg, store=store)  # every unit from the store
     assert resumed.units_traced == 0
     for name, estimates in traced.estimates.items():
         for mine, theirs in zip(estimates, resumed.estimates[name]):

@@ -2,24 +2,24 @@
 
 Independent seeds on both sides, so every cell's z = (f_exact - f_mesh) / sqrt(se_exact^2 +
 se_mesh^2) is about Student-t, and its mean square over the cells is bounded as in
-tests/stat_bounds.py. Level 3 (1280 triangles per sphere, mesh error 0.0024) moves the albedo by
+microsim.testing.bounds. Level 3 (1280 triangles per sphere, mesh error 0.0024) moves the albedo by
 under 1e-3 of the exact one (benchmarks/tessellation.py), far below these errors.
 """
 
 import numpy as np
 import pytest
-from stat_bounds import chi2_bound
 
 from microsim import config
 from microsim.core.orders import RESULT_ALL_ORDERS
-from microsim.run import runner
+from microsim.testing import trace
+from microsim.testing.bounds import chi2_bound
 
 REALIZATIONS = 16
 pytestmark = pytest.mark.slow  # 2 x 3 x 240 000 paths and 16 meshed scenes of ~0.4 M triangles
 
 
 def table(seed: int, **model):
-    return runner.run(config.validate({
+    return trace(config.validate({
         "scene": {"kind": "poisson_spheres", "volume_fraction": 0.3, "tile": 16.0, "depth": 12.0, **model},
         "material": {"kind": "lambert", "albedo": 0.8},
         "illumination": {"theta_i_deg": [0.0, 60.0, 85.0]},

@@ -1,14 +1,15 @@
-"""`microsim export` (issue 29, item 4): the MERL binary read back by a reader written here from
+"""`microsim export`: the MERL binary read back by a reader written here from
 the format's description, and the netCDF grid in Eradiate's mqdiffuse layout read by xarray;
 what either cannot hold, refused in one line."""
 
 import numpy as np
 import pytest
 
-from microsim import config, tables
+from microsim import tables
 from microsim.cli import main
 from microsim.models.tabulated import TabulatedBRDF
-from microsim.run import runner
+from microsim.testing import write_table
+from microsim.testing.refusals import assert_refused
 
 xr = pytest.importorskip("xarray")
 pytest.importorskip("h5netcdf")
@@ -22,8 +23,7 @@ SPHERES = {
 
 
 def traced(directory, name, illumination):
-    cfg = config.validate({**SPHERES, "illumination": illumination})
-    return tables.write(directory / f"{name}.h5", runner.run(cfg), cfg)
+    return write_table({**SPHERES, "illumination": illumination}, directory / f"{name}.h5")
 
 
 @pytest.fixture(scope="module")
@@ -146,13 +146,6 @@ def test_bad_exports_are_refused_in_one_line_and_write_nothing(full, tmp_path, c
     assert sorted(tmp_path.iterdir()) == before and taken.read_bytes() == b"keep me"
 
 
-def assert_refused(argv, capsys, *words):
-    assert main(argv) == 2
-    captured = capsys.readouterr()
-    lines = captured.err.strip().splitlines()
-    assert len(lines) == 1 and all(w in lines[0] for w in words) and captured.out == "", captured.err
-
-
 def test_no_export_writes_over_its_own_table(full, tmp_path, capsys):
     """`--out` the table itself (or a hard link to it) is refused, with --force or not: the export
     would replace the only copy of the BRDF it reads."""
@@ -196,7 +189,7 @@ def test_ctrl_c_during_an_export_leaves_no_temporary(full, tmp_path):
     import signal
     import sys
 
-    from test_signals import interrupt_group
+    from microsim.testing.interruptions import interrupt_group
 
     out = tmp_path / "brdf.binary"
     command = [sys.executable, "-c", SLOW_EXPORT, "export", str(full), "--format", "merl", "--out", str(out)]

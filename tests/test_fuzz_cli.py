@@ -1,12 +1,13 @@
-"""`microsim run` under fuzzing (issue 13, acceptance d, reduced size): every drawn config and
+"""`microsim run` under fuzzing (reduced size): every drawn config and
 command line either writes a valid table or exits 2 with one line, writing nothing; never a
-traceback (tests/cli_fuzzing.py; the full 500-case run is benchmarks/fuzz_cli.py)."""
+traceback (microsim.testing.fuzzing; the full 500-case run is benchmarks/fuzz_cli.py)."""
 
 import tempfile
 from pathlib import Path
 
-from cli_fuzzing import cases, check
 from hypothesis import HealthCheck, given, seed, settings
+
+from microsim.testing.fuzzing import cases, check
 
 #: examples in the suite (the benchmark draws 500 and more)
 EXAMPLES = 200

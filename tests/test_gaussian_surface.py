@@ -26,12 +26,14 @@ import math
 import h5py
 import numpy as np
 import pytest
-from refusals import assert_run_refused
 from scipy import stats
 
 from microsim import config, geometry
 from microsim.geometry import gaussian_surface, heightfield
 from microsim.physics.rng import geometry_rng
+from microsim.run.plan import Plan
+from microsim.testing import trace
+from microsim.testing.refusals import assert_run_refused
 from microsim.tracer.sensor import Sensor
 
 REALIZATIONS = 48
@@ -191,10 +193,9 @@ def test_bad_gaussian_surfaces_are_refused_in_one_line(keys, key, message, tmp_p
 def test_a_resumed_run_keeps_every_realizations_statistics_bit_for_bit(tmp_path, capsys):
     """The realizations' arrays (scene/ndf, vndf, g1) pass through the unit store's JSON: a run
     resumed from kept units writes the table a fresh run writes."""
-    from test_sweep import same_table
-
     from microsim.cli import main
-    from microsim.run import runner, unit_store
+    from microsim.run import unit_store
+    from microsim.testing.tables import same_table
 
     path = tmp_path / "run.toml"
     path.write_text('[scene]\nkind = "heightfield"\ngenerator = "gaussian"\nroughness = 0.5\ntile = 4.0\n'
@@ -202,9 +203,9 @@ def test_a_resumed_run_keeps_every_realizations_statistics_bit_for_bit(tmp_path,
                     '[illumination]\ntheta_i_deg = [0.0, 60.0]\n[sensor]\ncells = 50\n'
                     '[run]\npaths = 4000\nrealizations = 4\n')
     out, fresh = tmp_path / "kept.h5", tmp_path / "fresh.h5"
-    plan = runner.Plan.from_config(config.load(path))
+    plan = Plan.from_config(config.load(path))
     store = unit_store.UnitStore.open(unit_store.store_path(out), plan, resume=False)
-    runner.run(config.load(path), store=store)  # every unit kept, no table
+    trace(config.load(path), store=store)  # every unit kept, no table
     store.release()
     assert main(["run", str(path), "--out", str(out), "--resume"]) == 0
     assert main(["run", str(path), "--out", str(fresh)]) == 0

@@ -1,8 +1,8 @@
-"""The radiative-transfer half space (issue 12, item a): the medium scene and integrator, and the
+"""The radiative-transfer half space: the medium scene and integrator, and the
 isotropic closed form ``rte_isotropic``.
 
 Each table is judged over the cells with signal (table > 3 standard errors) by the mean z^2 per
-cell within the two-sided bounds of ``stat_bounds`` (each z Student-t with R - 1 degrees of
+cell within the two-sided bounds of ``microsim.testing.bounds`` (each z Student-t with R - 1 degrees of
 freedom). A realization of the homogeneous medium is an independent batch of paths.
 """
 
@@ -13,19 +13,19 @@ import math
 import numba
 import numpy as np
 import pytest
-from refusals import assert_run_refused, small_config
-from stat_bounds import chi2_bound, chi2_lower_bound
-from thread_identity import assert_bit_identical_for_threads
 
 from microsim import config, models
-from microsim.analysis.compare import cell_averages
+from microsim.analysis.averages import cell_averages
 from microsim.core.frames import direction
 from microsim.models import hfunctions as hf
 from microsim.models.quadrature import directional_albedo
 from microsim.models.radiative_transfer import single_scattering
 from microsim.physics.phase import ISOTROPIC, LAMBERT_SPHERE, phase_lambert_sphere, phase_lambert_sphere_cdf
 from microsim.physics.rng import path_state
-from microsim.run import runner
+from microsim.testing import trace
+from microsim.testing.bounds import chi2_bound, chi2_lower_bound
+from microsim.testing.refusals import assert_run_refused, small_config
+from microsim.testing.threads import assert_bit_identical_for_threads
 from microsim.tracer.integrators.medium import MediumTracer, scatter_direction
 
 REALIZATIONS = 32
@@ -92,7 +92,7 @@ def test_scattering_cosines_follow_the_phase_function(phase, cdf):
 @pytest.mark.slow
 def test_order_1_is_the_single_scattering_of_eq_10(phase, p):
     """Order 1 = c p(-wi.wo) / (mu_i + mu_o) (d'Eon 2021, Eq. 10), every cell."""
-    result = runner.run(medium_config(0.8, phase))
+    result = trace(medium_config(0.8, phase))
     assert_matches(result, 0, lambda wi, wo: single_scattering(wi, wo, 0.8, p))
 
 
@@ -104,7 +104,7 @@ def test_order_1_is_the_single_scattering_of_eq_10(phase, p):
 def test_isotropic_medium_is_chandrasekhars_closed_form(albedo, paths, cells):
     """The whole table (all orders) against c H(mu_i) H(mu_o) / (4 pi (mu_i + mu_o)), theta_i up
     to 85 deg; and the albedo against 1 - H(mu_i) sqrt(1 - c) within 4 standard errors."""
-    result = runner.run(medium_config(albedo, "isotropic", theta=(0.0, 60.0, 85.0), paths=paths, cells=cells))
+    result = trace(medium_config(albedo, "isotropic", theta=(0.0, 60.0, 85.0), paths=paths, cells=cells))
     model = models.create("rte_isotropic", albedo=albedo)
     assert_matches(result, 4, model)
     for i in range(3):
@@ -116,10 +116,10 @@ def test_isotropic_medium_is_chandrasekhars_closed_form(albedo, paths, cells):
 @pytest.mark.parametrize("albedo", [0.5, 0.99])
 @pytest.mark.slow
 def test_lambert_sphere_exact_is_the_medium_of_lambert_spheres(albedo):
-    """Item b: ``lambert_sphere`` with ``method = "exact"`` (Horak-Chandrasekhar constants, exact H)
+    """``lambert_sphere`` with ``method = "exact"`` (Horak-Chandrasekhar constants, exact H)
     against the medium of Lambert-sphere scatterers, all orders, within the two-sided bounds; the
-    paper's fitted ``lambert_sphere_fast`` fails them (median |rel| 2-10 %, measured in the note)."""
-    result = runner.run(medium_config(albedo, "lambert_sphere", theta=(0.0, 60.0, 85.0), paths=2_000_000))
+    paper's fitted ``lambert_sphere_fast`` fails them (median |rel| 2-10 %)."""
+    result = trace(medium_config(albedo, "lambert_sphere", theta=(0.0, 60.0, 85.0), paths=2_000_000))
     assert_matches(result, 4, models.create("lambert_sphere", albedo=albedo, method="exact"))
     fast = models.create("lambert_sphere_fast", albedo=albedo)
     fits = [agreement(result, 4, fast, i) for i in range(3)]
@@ -129,7 +129,7 @@ def test_lambert_sphere_exact_is_the_medium_of_lambert_spheres(albedo):
 @pytest.mark.slow
 def test_the_check_sees_a_wrong_albedo():
     """Power: the c = 0.9 table against the closed form of c = 0.89 lies above the upper bound."""
-    result = runner.run(medium_config(0.9, "isotropic", theta=(60.0,)))
+    result = trace(medium_config(0.9, "isotropic", theta=(60.0,)))
     n, z2 = agreement(result, 4, models.create("rte_isotropic", albedo=0.89), 0)
     assert z2 > chi2_bound(n, REALIZATIONS)
 
@@ -138,7 +138,7 @@ def test_white_medium_returns_every_unit_of_energy():
     """c = 1: albedo + truncated = 1 (nothing absorbed, nothing transmitted; paths cut at
     MAX_INTERACTIONS carry the rest, about 1e-3 of the energy: the conservative half space has a
     heavy tail of long paths)."""
-    result = runner.run(medium_config(1.0, "lambert_sphere", theta=(0.0, 60.0, 89.0), paths=40_000,
+    result = trace(medium_config(1.0, "lambert_sphere", theta=(0.0, 60.0, 89.0), paths=40_000,
                                       realizations=4, cells=100))
     for i in range(3):
         transmitted, truncated, absorbed, balance = result.energy[i].mean

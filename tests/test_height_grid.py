@@ -7,7 +7,7 @@ microsim/tracer/integrators/grid.py): the same triangles as Embree's, met by wal
 - A table traced on the grid and one traced on the triangles, with different seeds (independent
   paths) on the same surface (a height file), agree cell by cell and at exact directions (next-
   event estimation, whose shadow rays walk the grid too) within their errors: the mean z^2 lies
-  within ``stat_bounds``' two-sided bounds.
+  within ``microsim.testing.bounds``' two-sided bounds.
 - A [base] under the grid is met by a ray under the surface (as a pass-through at a back face
   leaves one), and not without a base.
 - Energy on the grid: tests/test_periodic_tile_physics.py (heightfields default to it); on the
@@ -20,14 +20,15 @@ import math
 
 import numpy as np
 import pytest
-from refusals import assert_run_refused, small_config
-from stat_bounds import chi2_bound, chi2_lower_bound
-from test_periodic_tile_physics import RIDGE_SAMPLES, ridges
 
 from microsim import config, tables
 from microsim.geometry import heightfield, periodic_tile
 from microsim.physics.rng import geometry_rng
-from microsim.run import runner
+from microsim.run.plan import Plan
+from microsim.testing import trace_table
+from microsim.testing.bounds import chi2_bound, chi2_lower_bound
+from microsim.testing.refusals import assert_run_refused, small_config
+from microsim.testing.surfaces import RIDGE_SAMPLES, ridges
 from microsim.tracer.estimators import DEFAULT, build
 from microsim.tracer.integrators.direct import DirectBackend
 from microsim.tracer.integrators.grid import HeightGrid, walk
@@ -43,7 +44,7 @@ def gaussian(intersector: str, **scene) -> dict:
 
 
 def realization(data: dict):
-    plan = runner.Plan.from_config(config.validate(data))
+    plan = Plan.from_config(config.validate(data))
     return plan, plan.generator.generate(plan.scene, plan.config, geometry_rng(plan.config.run.seed, 0))
 
 
@@ -121,9 +122,7 @@ def ridge_table(ridge_file, directory, intersector: str, seed: int, material=Non
         "illumination": {"theta_i_deg": [0.0, 60.0, 85.0], "phi_i_deg": [0.0, 30.0, 90.0]},
         "sensor": {"cells": 100, **points},
         "run": {"paths": 96_000, "realizations": 16, "seed": seed}})
-    path = directory / f"{intersector}{seed}.h5"
-    tables.write(path, runner.run(cfg), cfg)
-    return tables.load(path)
+    return trace_table(cfg, directory / f"{intersector}{seed}.h5")
 
 
 def test_grid_and_triangle_tables_agree_within_errors(ridge_file, tmp_path):

@@ -67,7 +67,7 @@ def test_the_grid_wraps_at_the_period():
     (lambda d: (d / "text.npy").write_text("no array") and str(d / "text.npy"), "not a NumPy file"),
 ])
 def test_a_bad_height_array_is_refused_in_one_line(make, message, tmp_path, tmp_path_factory, capsys):
-    from refusals import SMALL_RUN, assert_run_refused
+    from microsim.testing.refusals import SMALL_RUN, assert_run_refused
 
     path = make(tmp_path_factory.mktemp("heights"))  # beside the run's directory, which must stay empty
     assert_run_refused(f'[scene]\nkind = "heightfield"\npath = "{path}"\n' + SMALL_RUN, message, tmp_path, capsys)

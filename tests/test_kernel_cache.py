@@ -44,10 +44,10 @@ def test_every_numba_locator_adds_the_carried_stamp_for_microsim_files_only(tmp_
 
 
 def test_a_run_compiles_nothing_once_its_tracer_is_compiled_ahead(tmp_path):
-    """Issue 24, defect 14: a run of several albedos compiled its kernels again at its first unit
-    (129 s for 2000 paths, not announced, and inside the time left and paths/s; on forked workers,
-    where nothing sees it). runner.compile_tracer compiles every kernel the run calls, for its
-    number of albedos: in an empty numba cache, the run itself compiles nothing."""
+    """A run compiles nothing once its tracer is compiled ahead: runner.Run.compile compiles
+    every kernel the run calls, for its number of albedos, so that in an empty numba cache no
+    unit compiles (a compile there would be unannounced, inside the time left and paths/s, and
+    on forked workers, where nothing sees it)."""
     import subprocess
     import sys
 
@@ -57,7 +57,7 @@ from microsim import config; from microsim.run import runner
 cfg = config.validate({"scene": {"kind": "halfspace_medium", "phase": "isotropic"},
                        "material": {"kind": "lambert", "albedo": [0.3, 0.9]}, "illumination": {"theta_i_deg": [30.0]},
                        "sensor": {"cells": 50}, "run": {"paths": 2000, "realizations": 2}})
-runner.compile_tracer(runner.Plan.from_config(cfg))
+runner.Run.of(cfg).compile()
 compiled = []
 class Listener(event.Listener):
     def on_start(self, ev):
@@ -65,7 +65,8 @@ class Listener(event.Listener):
     def on_end(self, ev):
         pass
 event.register("numba:compile", Listener())
-runner.run_albedos(cfg)
+from microsim.testing import trace_albedos
+trace_albedos(cfg)
 print(compiled)
 """
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
@@ -82,7 +83,7 @@ EDITS = (
     ("microsim/models/lambert.py", "docstring", False),
     ("microsim/core/files.py", "docstring", False),
     ("microsim/geometry/plane.py", "constant", True),
-    ("microsim/tracer/materials.py", "constant", True),
+    ("microsim/tracer/materials/lambert.py", "constant", True),
     ("microsim/core/tally.py", "constant", True),
 )
 

@@ -15,9 +15,10 @@ ROOT = Path(__file__).resolve().parent.parent
 #: folder of the repository -> the package it is installed as
 FOLDERS = {"microsim": "microsim", "geometry": "microsim.geometry"}
 #: the layers, lowest first: a module of one imports none of a later one. The top-level modules
-#: ``microsim`` (its ``__init__``) and ``microsim.__main__`` are the outermost shell.
+#: ``microsim`` (its ``__init__``) and ``microsim.__main__`` are the outermost shell; ``testing``,
+#: what tests and benchmarks check the engine with, lies above it all (it runs the command line).
 LAYERS = ("core", "physics", "tracer", "geometry", "config", "tables", "run", "models", "analysis", "interop",
-          "app", ("testing", "cli"))
+          "app", "cli", "testing")
 #: modules of the package itself, outside every layer: the outermost shell (``microsim``'s
 #: ``__init__`` installs numba's setup; every layer may read its ``__version__``)
 SHELL = {"microsim": "cli", "microsim.__main__": "cli"}
@@ -110,6 +111,66 @@ def test_no_module_imports_geometry_as_a_top_level_package():
              if isinstance(node, ast.Import) and any(a.name.split(".")[0] == "geometry" for a in node.names)
              or isinstance(node, ast.ImportFrom) and not node.level and (node.module or "").split(".")[0] == "geometry"]
     assert found == []
+
+
+def cross_imports(source: str, local: set[str]) -> list[str]:
+    """The modules of ``local`` (the modules of tests/) that the code ``source`` imports, as
+    themselves or as ``tests.<module>``, and its relative imports, anywhere in it."""
+    def of_tests(name: str) -> bool:
+        parts = name.split(".")
+        return parts[0] in local or parts[0] == "tests"
+
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found += [alias.name for alias in node.names if of_tests(alias.name)]
+        elif isinstance(node, ast.ImportFrom) and (node.level or of_tests(node.module or "")):
+            found.append("." * node.level + (node.module or ""))
+    return found
+
+
+def puts_tests_on_path(source: str) -> bool:
+    """Whether the code ``source`` adds to ``sys.path`` (insert, append, extend) something that
+    names the tests folder."""
+    for node in ast.walk(ast.parse(source)):
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                and node.func.attr in ("insert", "append", "extend") and ast.unparse(node.func.value) == "sys.path"
+                and any(isinstance(arg, ast.Constant) and isinstance(arg.value, str) and "tests" in arg.value
+                        for argument in node.args for arg in ast.walk(argument))):
+            return True
+    return False
+
+
+def sharing_by_copy() -> list[str]:
+    """Test files that import another module of tests/, and benchmarks that import one or put
+    tests/ on sys.path: they share through microsim.testing instead."""
+    local = {p.stem for p in (ROOT / "tests").glob("*.py")}
+    found = [f"{p.relative_to(ROOT)} imports {name}" for p in sorted((ROOT / "tests").glob("test_*.py"))
+             for name in cross_imports(p.read_text(), local - {p.stem})]
+    for path in sorted((ROOT / "benchmarks").glob("*.py")):
+        source = path.read_text()
+        found += [f"{path.relative_to(ROOT)} imports {name}" for name in cross_imports(source, local)]
+        found += [f"{path.relative_to(ROOT)} puts tests/ on sys.path"] if puts_tests_on_path(source) else []
+    return found
+
+
+def test_tests_and_benchmarks_share_through_microsim_testing():
+    """No test file imports another module of tests/ (conftest's fixtures pytest gives the tests
+    by name, unimported), and no benchmark imports one or puts tests/ on sys.path: what they
+    share is in microsim.testing."""
+    assert sharing_by_copy() == []
+
+
+def test_the_sharing_check_sees_an_import_of_a_test_module_and_tests_on_the_path():
+    """The check itself: an import of a module of tests/ (plain, from, inside a function,
+    relative) and a sys.path entry naming tests/ are found; other imports and paths are not."""
+    local = {"test_sweep", "conftest", "toy_estimator"}
+    source = ("import os\nfrom test_sweep import same_table\nfrom microsim.testing import trace\n"
+              "def f():\n    import toy_estimator\n    from . import helpers\n"
+              "    from tests.refusals import SMALL_RUN\n")
+    assert cross_imports(source, local) == ["test_sweep", "toy_estimator", ".", "tests.refusals"]
+    assert puts_tests_on_path('import sys\nsys.path.insert(0, str(ROOT / "tests"))\n')
+    assert not puts_tests_on_path('import sys\nsys.path.insert(0, str(Path(__file__).parent))\n')
 
 
 def test_the_installed_packages_are_the_package_folders():

@@ -120,7 +120,7 @@ SMALLEST_P = 1e-4
 @pytest.mark.parametrize("theta_i", [10.0, 45.0, 80.0])
 @pytest.mark.parametrize("kind", sorted(MATERIALS))
 def test_every_material_draws_what_its_pdf_says_and_weighs_what_it_evaluates(kind, theta_i):
-    """Issue 25: the chi-square test of Mitsuba 3's chi2.py on every registered kind, with its
+    """Every registered kind passes the chi-square test of Mitsuba 3's chi2.py, with its
     ``example`` parameters, on a tilted shading normal (microsim.testing.material_check)."""
     from microsim.testing import material_check
 

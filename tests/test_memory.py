@@ -1,5 +1,4 @@
-"""Memory does not grow with ``paths``, and a run that cannot fit is refused before it starts
-(issue 9, defect 2)."""
+"""Memory does not grow with ``paths``, and a run that cannot fit is refused before it starts."""
 
 import numpy as np
 import pytest
@@ -7,7 +6,8 @@ import pytest
 from microsim import config, tables
 from microsim.cli import main
 from microsim.physics.rng import geometry_rng
-from microsim.run import runner
+from microsim.run.memory import available_memory, memory_estimate
+from microsim.run.plan import Plan
 from microsim.tracer.integrators import embreex
 from microsim.tracer.integrators.surface import SurfaceTracer
 from microsim.tracer.sensor import Sensor
@@ -25,7 +25,7 @@ def spheres(paths: int, backend: str = "direct", **scene) -> config.Config:
 
 def test_the_embreex_backend_traces_a_unit_in_batches_of_bounded_size(monkeypatch):
     cfg = spheres(4, "embreex", subdivisions=1)
-    plan = runner.Plan.from_config(cfg)
+    plan = Plan.from_config(cfg)
     scene = plan.generator.generate(plan.scene, plan.config, geometry_rng(1, 0))
     sensor = Sensor.build(100)
     whole = SurfaceTracer(scene, sensor, "embreex").trace(plan.incidence_direction(1), 5000, 7, 0)
@@ -39,15 +39,14 @@ def test_the_embreex_backend_traces_a_unit_in_batches_of_bounded_size(monkeypatc
 
 
 def test_the_memory_estimate_does_not_grow_with_paths():
-    sensor = Sensor.build(100)
     for backend, scene in (("direct", {}), ("embreex", {"subdivisions": 2})):
-        two_batches, huge = (runner.Plan.from_config(spheres(paths, backend, **scene))
+        two_batches, huge = (Plan.from_config(spheres(paths, backend, **scene))
                              for paths in (4 * 2 * embreex.BATCH_PATHS, 10**12))
-        assert runner.memory_estimate(huge, sensor, 2) == runner.memory_estimate(two_batches, sensor, 2)
-        assert runner.memory_estimate(huge, sensor, 1) < 2**30
+        assert memory_estimate(huge, 2) == memory_estimate(two_batches, 2)
+        assert memory_estimate(huge, 1) < 2**30
 
 
-@pytest.mark.skipif(runner.available_memory() is None, reason="no /proc/meminfo: the free memory is unknown")
+@pytest.mark.skipif(available_memory() is None, reason="no /proc/meminfo: the free memory is unknown")
 def test_a_run_that_cannot_fit_is_refused_in_one_line(tmp_path, capsys):
     path = tmp_path / "huge.toml"
     path.write_text(tables.config_to_toml(spheres(1000, tile=10_000.0, depth=1000.0)))  # 1e10 spheres

@@ -11,7 +11,6 @@
 from __future__ import annotations
 
 import hashlib
-import math
 
 import numpy as np
 import pytest
@@ -19,34 +18,8 @@ import trimesh
 
 from microsim import tables
 from microsim.app import session
-
-N = 16  # cells a side of the bumpy tile
-
-
-def bumpy(period: float = 2.0, lift_edge: float = 0.0, flip: bool = False, drop: int = 0):
-    """A periodic sinusoidal tile (vertices, faces): z = 0.3 sin(pi x) cos(pi y) on [0, period]^2;
-    ``lift_edge`` raises the x = 0 side (seams that no longer match), ``flip`` reverses the
-    winding, ``drop`` removes that many faces in the middle (a hole)."""
-    x = np.linspace(0.0, period, N + 1)
-    gx, gy = np.meshgrid(x, x, indexing="ij")
-    gz = 0.3 * np.sin(math.pi * gx) * np.cos(math.pi * gy)
-    gz[0, :] += lift_edge
-    vertices = np.column_stack([gx.ravel(), gy.ravel(), gz.ravel()])
-    faces = []
-    for i in range(N):
-        for j in range(N):
-            a, b = i * (N + 1) + j, (i + 1) * (N + 1) + j
-            faces += [[a, b, b + 1], [a, b + 1, a + 1]]
-    faces = np.array(faces)
-    if drop:  # the faces of cells in the middle of the tile, away from its sides
-        middle = 2 * ((N // 2) * N + N // 2)
-        faces = np.delete(faces, range(middle, middle + drop), axis=0)
-    return vertices, faces[:, ::-1] if flip else faces
-
-
-def write(path, vertices, faces):
-    trimesh.Trimesh(vertices, faces, process=False).export(path)
-    return str(path)
+from microsim.testing.surfaces import N, bumpy
+from microsim.testing.surfaces import write_mesh as write
 
 
 def mesh_config(path, albedo=0.8, theta=(0.0, 60.0), **scene) -> dict:
@@ -112,7 +85,7 @@ def test_a_format_without_shared_vertices_traces_as_the_ply_of_its_triangles(suf
     (lambda d: (d / "text.obj").write_text("this is no mesh\n") and str(d / "text.obj"), "scene.path"),
 ])
 def test_a_bad_mesh_is_refused_in_one_line(make, message, tmp_path, tmp_path_factory, capsys):
-    from refusals import SMALL_RUN, assert_run_refused
+    from microsim.testing.refusals import SMALL_RUN, assert_run_refused
 
     path = make(tmp_path_factory.mktemp("meshes"))  # beside the run's directory, which must stay empty
     assert_run_refused(f'[scene]\nkind = "mesh"\npath = "{path}"\n' + SMALL_RUN, message, tmp_path, capsys)
@@ -170,7 +143,7 @@ def test_a_rectangular_tile_traces_as_the_square_tile_of_the_same_surface(tmp_pa
 @pytest.mark.parametrize("keys, key", [("period_x = 4.0", "scene.period_y"), ("period_y = 1.0", "scene.period_x"),
                                        ("period = 4.0\nperiod_x = 4.0\nperiod_y = 1.0", "scene.period")])
 def test_half_a_rectangular_period_is_refused_in_one_line(keys, key, tmp_path, tmp_path_factory, capsys):
-    from tests.refusals import SMALL_RUN, assert_run_refused
+    from microsim.testing.refusals import SMALL_RUN, assert_run_refused
 
     path = write(tmp_path_factory.mktemp("rect") / "rect.ply", *ridges(1.0, 1))
     assert_run_refused(f'[scene]\nkind = "mesh"\npath = "{path}"\n{keys}\n' + SMALL_RUN, key, tmp_path, capsys)

@@ -1,4 +1,4 @@
-"""The same triangles, the same table (issue 28, item b): a Boolean-sphere realization exported as
+"""The same triangles, the same table: a Boolean-sphere realization exported as
 icospheres to a PLY tile (``microsim.geometry.poisson_spheres.export_tile``) and traced as scene ``mesh``
 (``period`` = the tile, the same ``[base]``) gives that realization's table of
 ``poisson_spheres`` with ``shading = "flat"``, bit for bit.
@@ -19,7 +19,7 @@ What makes them comparable, by construction (geometry/poisson_spheres.py's modul
   (seed, realization, incidence), whatever the scene.
 
 ``run.realizations`` is at least 2 and the mesh is one tile, while the spheres are drawn anew each
-realization: realization 0 is compared (``runner.trace_realizations``, every realization's
+realization: realization 0 is compared (``microsim.testing.trace_realizations``, every realization's
 estimates, those the table averages). Realization 1, other spheres against the same tile, must
 differ, and so must the tile traced with exact shading, shifted by half a radius, or written in
 float32: the comparison sees what is not the same.
@@ -36,7 +36,8 @@ import trimesh
 from microsim import config
 from microsim.geometry import mesh, periodic_tile, poisson_spheres
 from microsim.physics.rng import geometry_rng
-from microsim.run import runner
+from microsim.run.plan import Plan
+from microsim.testing import trace_realizations
 
 SPHERES = {"scene": {"kind": "poisson_spheres", "volume_fraction": 0.3, "tile": 10.0, "depth": 4.0,
                      "subdivisions": 1, "shading": "flat"},
@@ -55,7 +56,7 @@ def exported(tmp_path_factory):
 
 
 def test_the_mesh_scene_lays_the_same_arrays(exported):
-    plans = [runner.Plan.from_config(c) for c in exported]
+    plans = [Plan.from_config(c) for c in exported]
     a, b = (plan.generator.generate(plan.scene, plan.config, geometry_rng(SEED, 0)) for plan in plans)
     assert 20 <= a.info["spheres"] and a.info["copies"] > 0  # spheres cross the sides: wrapped in
     for name in ("vertices", "faces", "face_shape", "spheres", "sphere_shape"):
@@ -80,7 +81,7 @@ def test_the_ply_holds_the_triangles_as_laid(exported):
 
 
 def test_the_mesh_gives_the_flat_spheres_table_bit_for_bit(exported):
-    (_, spheres), (_, meshed) = (runner.trace_realizations(c) for c in exported)
+    (_, spheres), (_, meshed) = (trace_realizations(c) for c in exported)
     assert spheres.keys() == meshed.keys() >= {"brdf", "albedo"}
     for name in spheres:
         assert np.array_equal(spheres[name][0], meshed[name][0]), name  # the realization exported
@@ -96,7 +97,7 @@ def test_the_smooth_mesh_gives_the_smooth_spheres_table_bit_for_bit(exported, tm
     scene = poisson_spheres.export_tile(spheres, tmp_path / "smooth.ply")
     assert scene["shading"] == "smooth"
     meshed = config.validate({**data, "scene": scene})
-    (_, a), (_, b), (_, flat) = (runner.trace_realizations(c) for c in (spheres, meshed, exported[0]))
+    (_, a), (_, b), (_, flat) = (trace_realizations(c) for c in (spheres, meshed, exported[0]))
     for name in a:
         assert np.array_equal(a[name][0], b[name][0]), name
     assert not np.array_equal(a["brdf"][0], flat["brdf"][0])
@@ -123,13 +124,13 @@ def test_the_comparison_sees_a_changed_scene(change, exported):
         changed = _rewritten(path, "moved.ply", move=(0.5, 0.0, 0.0)) if change.startswith("tile") else \
             _rewritten(path, "float32.ply", float32=True)
         meshed = config.validate({**SPHERES, "scene": {**meshed.scene.model_dump(), "path": changed}})
-    (_, a), (_, b) = (runner.trace_realizations(c) for c in (spheres, meshed))
+    (_, a), (_, b) = (trace_realizations(c) for c in (spheres, meshed))
     assert not np.array_equal(a["brdf"][0], b["brdf"][0])
 
 
 @pytest.mark.parametrize("shading", ["flat", "smooth"])
 def test_flat_and_smooth_shading_need_icospheres(shading, tmp_path, capsys):
-    from refusals import assert_run_refused, small_config
+    from microsim.testing.refusals import assert_run_refused, small_config
 
     assert_run_refused(small_config(f'kind = "poisson_spheres"\nvolume_fraction = 0.3\nshading = "{shading}"'),
                        f"scene.shading = '{shading}'", tmp_path, capsys, "icospheres only")
@@ -155,7 +156,7 @@ def test_seams_are_matched_where_the_tile_puts_them():
     """With a period, a periodic surface is laid where it lies and its seams are matched a period
     apart wherever they are: moved by a quarter period, or with a closed body crossing a side
     (the bounds then are not the seams); a lifted seam is refused there as at 0."""
-    from test_mesh import bumpy
+    from microsim.testing.surfaces import bumpy
 
     ball = trimesh.creation.icosphere(1, radius=0.3)
 

@@ -1,19 +1,19 @@
-"""Micrograin fields (issue 10): the scene, single scattering against the ``micrograin`` model,
+"""Micrograin fields: the scene, single scattering against the ``micrograin`` model,
 its grain and base terms, the white furnace, reciprocity and robustness.
 
-Single scattering (acceptance b, c). With ``max_order = 1`` the table's order 1 is the exact
+Single scattering. With ``max_order = 1`` the table's order 1 is the exact
 single scattering of the explicit field, which is what the fully-correlated model (Eq. 20-23)
 claims to be for Lambertian and conductor grains. Each case is checked over the cells with
 signal (table > 3 standard errors) by the mean z^2 per cell, bounded by
-``stat_bounds.chi2_bound(cells, R)`` above and ``chi2_lower_bound`` below (standard errors too
+``microsim.testing.bounds.chi2_bound(cells, R)`` above and ``chi2_lower_bound`` below (standard errors too
 large would pass an upper bound alone): each z is Student-t with R - 1 degrees of freedom (a
 standard error from R realizations), so the mean z^2 is about (R - 1) / (R - 3), and the bounds
 add and take 5 standard deviations of that mean. Cells of one realization share its geometry, so their
 z's are correlated and the mean z^2 spreads more than for independent cells; at grazing
 incidence the base term is dominated by a few gaps between grains, whose realization means are
-skewed: with 32 realizations the base term at theta_i = 86 deg (tau0 = 0.6, beta = 0.5) came out
+skewed: with 32 realizations the base term at theta_i = 86 deg (tau0 = 0.6, beta = 0.5) comes out
 2.7 standard errors low, with 256 it sits within 1 of the model for three seeds. The base checks
-therefore use R = 256 (cheap: the scenes are small). The median |rel| <= 2 % of item b is noise
+therefore use R = 256 (cheap: the scenes are small). The order-1 check's median |rel| <= 2 % is noise
 plus model error: the path counts are chosen so that the noise alone sits near 1 %.
 """
 
@@ -23,17 +23,18 @@ import json
 
 import numpy as np
 import pytest
-from matching_cells import RECIPROCITY_CELLS, reciprocity_z, ring_incidences
-from stat_bounds import chi2_bound, chi2_lower_bound
 
 from microsim import config, geometry, models
-from microsim.analysis.compare import cell_averages
+from microsim.analysis.averages import cell_averages
+from microsim.testing import trace_table, write_table
+from microsim.testing.bounds import chi2_bound, chi2_lower_bound
+from microsim.testing.reciprocity import RECIPROCITY_CELLS, reciprocity_z, ring_incidences
 from microsim.tracer.shapes import ELLIPSOID
 
 CONDUCTOR = {"kind": "conductor", "eta": 1.0152, "k": 6.6273}
 LAMBERT = {"kind": "lambert", "albedo": 0.5}
 THETA_I = [0.0, 45.0, 70.0, 86.0]
-#: (tau0, beta_x, beta_y) of item b; the anisotropic field is measured at phi_i = 0 and 90 deg
+#: (tau0, beta_x, beta_y) of the order-1 checks; the anisotropic field is measured at phi_i = 0 and 90 deg
 FIELDS = [(0.3, 1.0, 1.0), (0.6, 0.5, 0.5), (0.9, 2.0, 2.0), (0.5, 0.5, 2.0)]
 GRAIN_MODEL = {"conductor": {"material": "conductor", "eta": 1.0152, "k": 6.6273},
                "lambert": {"material": "lambert", "albedo": 0.5}}
@@ -177,9 +178,8 @@ def incidences(tables):
 
 @pytest.fixture(scope="module")
 def single_tables(tmp_path_factory):
-    """Order-1 tables on an absorbing base, by grain material and field (item b): a list each."""
+    """Order-1 tables on an absorbing base, by grain material and field: a list each."""
     from microsim import tables
-    from microsim.run import runner
 
     out = {}
     directory = tmp_path_factory.mktemp("micrograins")
@@ -190,7 +190,7 @@ def single_tables(tmp_path_factory):
                 cfg = config.validate(micrograin_config(field, CONDUCTOR if grain == "conductor" else LAMBERT,
                                                         theta=theta, paths=paths))
                 path = directory / f"{grain}-{field}-{len(out[grain, field])}.h5"
-                tables.write(path, runner.run(cfg, workers=2), cfg)
+                write_table(cfg, path, workers=2)
                 out[grain, field].append(tables.load(path))
     return out
 
@@ -199,7 +199,8 @@ def single_tables(tmp_path_factory):
 @pytest.mark.parametrize("grain", ["conductor", "lambert"])
 @pytest.mark.parametrize("field", FIELDS, ids=str)
 def test_order_1_equals_the_correlated_model(single_tables, grain, field):
-    """Item b: every incidence of every field, conductor (Fig. 7) and Lambertian (Fig. 8) grains."""
+    """Order 1 is the model at every incidence of every field, conductor (Fig. 7) and Lambertian
+    (Fig. 8) grains."""
     model = model_of(field, **GRAIN_MODEL[grain])
     for table, i, wi in incidences(single_tables[grain, field]):
         order_1, stderr = table.brdf_order[:, 0, :], table.arrays["brdf_order_stderr"][:, 0, :]
@@ -244,7 +245,7 @@ def test_the_uncorrelated_model_fails_at_grazing_incidence(single_tables, grain)
 def test_the_base_material_leaves_the_grains_order_1_alone(simulate, grain):
     """The rest of order 1 is the grains' term: on a Lambertian base, order 1 minus the base's
     tally is the order 1 of the same paths on an absorbing base (the base's material acts only
-    after a path's first interaction), so item b's check of the grain term holds for any base."""
+    after a path's first interaction), so the order-1 check of the grain term holds for any base."""
     field = (0.5, 0.5, 2.0)
     material = CONDUCTOR if grain == "conductor" else LAMBERT
     lambert_base = simulate(micrograin_config(field, material, base={"kind": "lambert", "albedo": 0.5},
@@ -296,17 +297,13 @@ def test_white_furnace_returns_every_path(simulate, tau0, beta):
 @pytest.fixture(scope="module")
 def reciprocity_table(tmp_path_factory):
     """All orders on an anisotropic field, incidences at ring centres x phi_i in {0, 90} deg."""
-    from microsim import tables
-    from microsim.run import runner
 
     incidences = ring_incidences()
     cfg = config.validate(micrograin_config((0.5, 0.5, 2.0), {"kind": "lambert", "albedo": 0.8},
                                             base={"kind": "lambert", "albedo": 0.5},
                                             theta=[t for _, t, _ in incidences], phi=[p for _, _, p in incidences],
                                             paths=400_000, realizations=16, max_order=0, cells=RECIPROCITY_CELLS))
-    path = tmp_path_factory.mktemp("reciprocity") / "table.h5"
-    tables.write(path, runner.run(cfg, workers=2), cfg)
-    return tables.load(path), incidences
+    return trace_table(cfg, tmp_path_factory.mktemp("reciprocity") / "table.h5", workers=2), incidences
 
 
 @pytest.mark.slow

@@ -4,7 +4,6 @@ import math
 
 import numpy as np
 import pytest
-from model_helpers import assert_rejected, assert_zero_below_horizon, random_pairs
 
 from microsim import models
 from microsim.core.frames import direction
@@ -14,6 +13,7 @@ from microsim.models.quadrature import directional_albedo
 from microsim.physics import distributions as nd
 from microsim.physics import fresnel
 from microsim.physics.fresnel import fresnel_dielectric_array
+from microsim.testing.models import assert_rejected, assert_zero_below_horizon, random_pairs
 
 
 def _gl(n, a, b):

@@ -9,7 +9,6 @@ import math
 
 import numpy as np
 import pytest
-from model_helpers import assert_rejected, assert_zero_below_horizon, random_pairs
 from scipy.special import erf
 
 from microsim import models
@@ -18,6 +17,7 @@ from microsim.models.microfacet import specular_brdf
 from microsim.models.quadrature import directional_albedo
 from microsim.physics import distributions as nd
 from microsim.physics.fresnel import fresnel, fresnel_array, fresnel_conductor_array, fresnel_dielectric_array
+from microsim.testing.models import assert_rejected, assert_zero_below_horizon, random_pairs
 
 ISOTROPIC = [0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0]
 ANISOTROPIC = [(0.01, 0.1), (0.05, 1.0), (1.0, 0.1), (0.3, 3.0), (0.01, 3.0)]

@@ -11,7 +11,6 @@ import math
 import numba
 import numpy as np
 import pytest
-from model_helpers import assert_rejected, assert_zero_below_horizon
 from scipy.integrate import quad
 from scipy.special import roots_legendre
 
@@ -29,6 +28,7 @@ from microsim.physics.boolean_model import (
     unit_space_height_array,
 )
 from microsim.physics.fresnel import fresnel_array, fresnel_conductor_array
+from microsim.testing.models import assert_rejected, assert_zero_below_horizon
 
 LAMBERT_BULK = dict(bulk="lambert", bulk_albedo=0.6)
 MODEL_CASES = [

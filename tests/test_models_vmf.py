@@ -4,13 +4,13 @@ import math
 
 import numpy as np
 import pytest
-from model_helpers import assert_rejected, random_pairs
 from scipy.special import i0e
 
 from microsim import models
 from microsim.core.frames import direction
 from microsim.models import vmf_diffuse as vmf
 from microsim.models.quadrature import directional_albedo, hemisphere_rule
+from microsim.testing.models import assert_rejected, random_pairs
 
 ROUGHNESS = [0.0, 1e-6, 0.02, 0.0489, 0.05, 0.1, 0.2, 0.3, 0.352, 0.36, 0.5, 0.7, 0.9, 1.0 - 1e-12, 1.0]
 

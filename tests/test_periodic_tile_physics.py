@@ -1,6 +1,6 @@
-"""Issue 28, acceptance c and e for the ``mesh`` and ``heightfield`` scenes (geometry/periodic_tile.py).
+"""Energy, reciprocity and bad input for the ``mesh`` and ``heightfield`` scenes (geometry/periodic_tile.py).
 
-c. Energy: a white Lambertian or mirror tile is closed by its surface (no [base]; nothing can be
+1. Energy: a white Lambertian or mirror tile is closed by its surface (no [base]; nothing can be
    absorbed or transmitted), so every path leaves or is truncated: albedo + truncated = 1 to
    1e-6 at theta_i = 0, 60, 85 and 89 deg, for a mesh with vertical walls (cells at several
    heights, one a ridge running through the seams) and an anisotropic heightfield, each white
@@ -9,33 +9,34 @@ c. Energy: a white Lambertian or mirror tile is closed by its surface (no [base]
    tests/test_mesh.py and test_heightfield.py already hold a white bumpy tile (no walls, no
    mirror, no 85 deg) to 1e-12.
    Reciprocity: an anisotropic Lambertian heightfield (albedo 0.8, about a third of the energy
-   in orders 2+) at the ring-centre incidences of tests/matching_cells.py (phi_i 0 and 90 deg):
+   in orders 2+) at the ring-centre incidences of microsim.testing.reciprocity (phi_i 0 and 90 deg):
    f(a -> b) = f(b -> a) within 4.5 combined standard errors for every pair of matching cells
    (the quantity of every reciprocity test of the suite, ``reciprocity_z``). The same comparison
    rejects f cos(theta_o), which is not reciprocal, and the pairing with the incidences'
    azimuths swapped (what a tracer that ignored phi_i, or turned the scene, would give).
-e. Bad input not covered by tests/test_mesh.py and test_heightfield.py: unreadable (corrupt)
+2. Bad input not covered by tests/test_mesh.py and test_heightfield.py: unreadable (corrupt)
    files, a directory, a mesh with no triangles, extents that are not one square period, a
    period (or scale, pixel, height scale) of 0, negative, NaN or infinite, heights that are
    infinite, of one sample, boolean or three-dimensional, and a tile too large for the memory
    (refused by the memory estimate before anything is traced): one line naming the key or the
    file, exit 2, nothing written; a mesh with a slit in a vertical wall (a hole with no projected
-   area, through which about 1 % of the light was transmitted before open edges off the seams
-   were refused).
+   area, through which about 1 % of the light would be transmitted: open edges off the seams are
+   refused).
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 import trimesh
-from matching_cells import RECIPROCITY_CELLS, reciprocity_z, ring_incidences
-from refusals import SMALL_RUN, assert_run_refused
 
 from microsim import config, tables
-from microsim.run import runner
+from microsim.run import memory, runner
+from microsim.run.memory import PROCESS_BYTES
+from microsim.testing import trace_table
+from microsim.testing.reciprocity import RECIPROCITY_CELLS, reciprocity_z, ring_incidences
+from microsim.testing.refusals import SMALL_RUN, assert_run_refused
+from microsim.testing.surfaces import RIDGE_SAMPLES, ridges, write_mesh
 
 WHITE = {"kind": "lambert", "albedo": 1.0}
 MIRROR = {"kind": "mirror"}
@@ -47,7 +48,6 @@ LEVELS = np.array([[0, 0, 0, 0],
                    [2, 2, 2, 2],
                    [0, 3, 1, 0],
                    [0, 0, 0, 0]])
-RIDGE_SAMPLES = 32
 
 
 def walled(levels=LEVELS, cell: float = 0.25, step: float = 0.25, slit: int | None = None):
@@ -97,21 +97,6 @@ def walled(levels=LEVELS, cell: float = 0.25, step: float = 0.25, slit: int | No
     return vertices, faces
 
 
-def ridges(n: int = RIDGE_SAMPLES) -> np.ndarray:
-    """An anisotropic periodic height array of one period 1 (pixel 1 / n): steep asymmetric ridges
-    along y (RMS slope about 1.9), gentle waves along x, an oblique term that breaks the mirror
-    symmetries."""
-    x = np.arange(n) / n
-    gx, gy = np.meshgrid(x, x, indexing="ij")
-    return (0.3 * (np.sin(2 * math.pi * gx) + 0.5 * np.sin(4 * math.pi * gx)) + 0.04 * np.cos(4 * math.pi * gy)
-            + 0.05 * np.sin(2 * math.pi * (gx + gy)))
-
-
-def write_mesh(path, vertices, faces) -> str:
-    trimesh.Trimesh(vertices, faces, process=False).export(path)
-    return str(path)
-
-
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     """The walled mesh (PLY) and the ridges height array (.npy), beside the runs' directories."""
@@ -128,9 +113,7 @@ def scene(kind: str, files, shading: str = "flat") -> dict:
 
 def run_table(data: dict, directory) -> tables.Table:
     cfg = config.validate(data)
-    path = directory / "table.h5"
-    tables.write(path, runner.run(cfg), cfg)
-    return tables.load(path)
+    return trace_table(cfg, directory / "table.h5")
 
 
 # ---------------------------------------------------------------- c: energy
@@ -320,9 +303,9 @@ def test_a_tile_too_large_for_the_memory_is_refused_before_tracing(kind, files, 
     def not_before_the_refusal(*args, **kwargs):
         raise AssertionError("traced a run that cannot fit")
 
-    monkeypatch.setattr(runner, "available_memory", lambda: runner.PROCESS_BYTES + 1024)
-    monkeypatch.setattr(runner, "compile_tracer", not_before_the_refusal)
-    monkeypatch.setattr(runner, "trace", not_before_the_refusal)
+    monkeypatch.setattr(memory, "available_memory", lambda: PROCESS_BYTES + 1024)
+    monkeypatch.setattr(runner.Run, "compile", not_before_the_refusal)
+    monkeypatch.setattr(runner.Run, "trace", not_before_the_refusal)
     lines = f'[scene]\nkind = "{kind}"\npath = "{files[kind]}"\n'
     if kind == "heightfield":
         lines += f"pixel = {1.0 / RIDGE_SAMPLES}\n"

@@ -1,7 +1,9 @@
-"""Acceptance a: a flat Lambertian plane is exactly albedo / pi in every cell, single scattering only."""
+"""A flat Lambertian plane is exactly albedo / pi in every cell, single scattering only."""
 
 import numpy as np
 import pytest
+
+from microsim.testing import trace_table
 
 ALBEDO = 0.5
 pytestmark = pytest.mark.slow  # 8 M paths
@@ -9,8 +11,7 @@ pytestmark = pytest.mark.slow  # 8 M paths
 
 @pytest.fixture(scope="module")
 def plane_table(tmp_path_factory):
-    from microsim import config, tables
-    from microsim.run import runner
+    from microsim import config
 
     cfg = config.validate({
         "scene": {"kind": "plane"},
@@ -22,9 +23,7 @@ def plane_table(tmp_path_factory):
         # every one of the 9720 cells (with ~27 paths, Poisson tails and the estimated sigma fail it).
         "run": {"paths": 8_000_000, "realizations": 256, "seed": 1},
     })
-    path = tmp_path_factory.mktemp("plane") / "plane.h5"
-    tables.write(path, runner.run(cfg), cfg)
-    return tables.load(path)
+    return trace_table(cfg, tmp_path_factory.mktemp("plane") / "plane.h5")
 
 
 def test_every_cell_within_4_5_standard_errors_of_albedo_over_pi(plane_table):

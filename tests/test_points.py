@@ -27,7 +27,8 @@ from microsim import config, models, tables
 from microsim.app import session
 from microsim.core.orders import ORDERS
 from microsim.physics.phase import phase_lambert_sphere
-from microsim.run import runner
+from microsim.run.plan import Plan
+from microsim.testing import trace_realizations
 
 #: two-sided level of the Hotelling bounds
 ALPHA = 1e-3
@@ -35,7 +36,7 @@ ALPHA = 1e-3
 
 def per_realization(cfg: dict):
     """(plan, every realization's estimates by name) of the config dict ``cfg``."""
-    return runner.trace_realizations(config.validate(cfg))
+    return trace_realizations(config.validate(cfg))
 
 
 def hotelling(deviations: np.ndarray) -> tuple[float, float, float]:
@@ -119,7 +120,7 @@ def medium_config(phase: str, max_order: int, paths: int, realizations: int, see
 def test_the_media_order_1_is_c_p_over_mu_i_plus_mu_o_at_every_point():
     plan, est = per_realization(medium_config("lambert_sphere", 1, 800_000, 40))
     points = est["brdf_points"][:, :, 0]  # order 1: (R, n_i, K)
-    sensor = plan.build_sensor()
+    sensor = plan.sensor
     exact = np.zeros(points.shape[1:])
     for i in range(plan.n_incidences):
         wi = plan.incidence_direction(i)
@@ -133,7 +134,7 @@ def test_the_media_order_1_is_c_p_over_mu_i_plus_mu_o_at_every_point():
 def test_the_isotropic_media_points_are_rte_isotropic_at_every_point():
     plan, est = per_realization(medium_config("isotropic", 0, 1_200_000, 40))
     points = est["brdf_points"][:, :, ORDERS]  # all orders (the row after the four orders)
-    sensor = plan.build_sensor()
+    sensor = plan.sensor
     model = models.create("rte_isotropic", albedo=0.9)
     exact = np.array([model(np.broadcast_to(plan.incidence_direction(i), (sensor.n_points, 3)),
                             sensor.point_directions(plan.incidence_direction(i), plan.phi_i[i]))
@@ -155,7 +156,7 @@ def test_lambertian_v_cavities_order_1_is_interfaced_lambert_at_eta_1_with_the_v
            "run": {"paths": 600_000, "realizations": 40, "seed": 5, "max_order": 1}}
     plan, est = per_realization(cfg)
     points = est["brdf_points"][:, :, 0]
-    sensor = plan.build_sensor()
+    sensor = plan.sensor
     model = models.create("interfaced_lambert", albedo=0.8, eta=1.0, roughness=0.6, distribution="beckmann",
                           gaf="torrance_sparrow")
     exact = np.array([model(np.broadcast_to(plan.incidence_direction(i), (sensor.n_points, 3)),
@@ -195,7 +196,7 @@ def test_points_averaged_over_a_cell_are_the_binned_cell(scene):
     if base is not None:
         cfg["base"] = base
     plan, est = per_realization(cfg)
-    assert plan.build_sensor().n_cells == sensor.n_cells
+    assert plan.sensor.n_cells == sensor.n_cells
     points = est["brdf_points"][:, 0].reshape(plan.realizations, ORDERS + 1, len(cells), -1)
     averaged = np.sum(points * weights, axis=-1)  # (R, rows, cells)
     binned = est["brdf"][:, 0][:, :, cells]
@@ -281,7 +282,7 @@ def test_the_embreex_backend_sees_what_the_direct_one_sees(tmp_path):
     ("retro_points_deg = [" + ", ".join(["0.2"] * 300) + "]", "sensor.retro_points_deg: 0 directions_deg and 300"),
 ])
 def test_bad_points_are_refused_in_one_line(sensor, key, tmp_path, capsys):
-    from refusals import SMALL_RUN, assert_run_refused
+    from microsim.testing.refusals import SMALL_RUN, assert_run_refused
 
     assert_run_refused("[scene]\nkind = \"plane\"\n" + SMALL_RUN.replace("cells = 100", "cells = 100\n" + sensor),
                        key, tmp_path, capsys)
@@ -292,7 +293,7 @@ def test_bad_points_are_refused_in_one_line(sensor, key, tmp_path, capsys):
     '[material]\nkind = "conductor"\neta = 0.2\nk = 3.0\n',
 ])
 def test_points_on_a_scene_of_delta_lobes_only_are_refused(materials, tmp_path, capsys):
-    from refusals import SMALL_RUN, assert_run_refused
+    from microsim.testing.refusals import SMALL_RUN, assert_run_refused
 
     rest = SMALL_RUN.replace('[material]\nkind = "lambert"\nalbedo = 0.8\n', materials)
     assert_run_refused('[scene]\nkind = "vcavities"\nroughness = 0.5\n' + rest.replace(
@@ -359,12 +360,12 @@ def test_a_run_with_points_takes_the_kernel_a_run_without_them_compiled():
     base = {"scene": {"kind": "poisson_spheres", "volume_fraction": 0.3},
             "material": {"kind": "lambert", "albedo": 0.8},
             "illumination": {"theta_i_deg": [30.0]}, "run": {"paths": 1000}}
-    plans = [runner.Plan.from_config(config.validate({**base, "sensor": sensor}))
+    plans = [Plan.from_config(config.validate({**base, "sensor": sensor}))
              for sensor in ({"cells": 100}, {"cells": 100, "directions_deg": [[0.0, 0.0]], "retro_points_deg": [1.0]})]
     assert plans[0].estimator_names == plans[1].estimator_names
     types = []
     for plan in plans:
-        sensor = plan.build_sensor()
-        records = tuple(estimator.allocate(4, 1) for estimator in plan.build_estimators(sensor))
+        sensor = plan.sensor
+        records = tuple(estimator.allocate(4, 1) for estimator in plan.estimators)
         types.append((numba.typeof(records), numba.typeof(sensor.points)))
     assert types[0] == types[1]

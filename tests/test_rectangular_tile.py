@@ -1,4 +1,4 @@
-"""A rectangular periodic tile, [0, L_x) x [0, L_y) (issue 28): the surface tracer wraps x by L_x
+"""A rectangular periodic tile, [0, L_x) x [0, L_y): the surface tracer wraps x by L_x
 and y by L_y, at every place it folds a point or meets a side.
 
 - Exact, the kernels alone: a straight ray through an empty 4 x 1 tile meets the sides in the

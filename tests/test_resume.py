@@ -1,4 +1,4 @@
-"""Resumable runs (issue 13, deliverables 2 and 6): finished units are kept in <table>.partial as
+"""Resumable runs: finished units are kept in <table>.partial as
 they end; a run killed by SIGKILL, or stopped by SIGTERM, and then resumed writes a table bit-
 identical to an uninterrupted run, tracing only the units that were missing (counted); a
 resume of another config is refused in one line; kept units are never discarded unasked."""
@@ -6,56 +6,21 @@ resume of another config is refused in one line; kept units are never discarded 
 import os
 import re
 import signal
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import pytest
-from test_cli_run import SPHERES
-from test_sweep import same_table
 
 from microsim import config as config_module
 from microsim.cli import main
-from microsim.run import runner, unit_store
+from microsim.run import memory, unit_store
+from microsim.run.plan import Plan
+from microsim.testing import trace
+from microsim.testing.interruptions import RUN, UNITS, kill_at_half, saved, start, wait_for_units
+from microsim.testing.tables import same_table
 
-#: test_cli_run's small spheres, with units long enough to be stopped between
-RUN = SPHERES.replace('name = "small"', 'name = "resumable"').replace("paths = 20_000", "paths = 2_560_000") \
-    .replace("realizations = 4", "realizations = 16")
-assert "paths = 2_560_000" in RUN and "realizations = 16" in RUN
-UNITS = 32  # 16 realizations x 2 incidences
 RESUMED = re.compile(r"(\d+) of (\d+) units resumed, (\d+) traced")
-
-
-def saved(out: Path) -> int:
-    """Finished units in the store of the run writing ``out``."""
-    return len(list(unit_store.store_path(out).glob("r*_i*.npz")))
-
-
-def start(config: Path, out: Path, *flags) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "microsim", "run", str(config), "--out", str(out), *flags],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-
-
-def wait_for_units(process, out: Path, count: int, seconds: float = 120) -> None:
-    end = time.monotonic() + seconds
-    while saved(out) < count:
-        assert process.poll() is None, process.communicate()
-        assert time.monotonic() < end, "the run kept no unit"
-        time.sleep(0.01)
-
-
-def kill_at_half(process, out: Path) -> None:
-    """SIGKILL the run writing ``out`` once it kept half its units; its workers die with it
-    (PR_SET_PDEATHSIG), so nothing more is saved."""
-    try:
-        wait_for_units(process, out, UNITS // 2)
-        process.send_signal(signal.SIGKILL)
-        assert process.wait(timeout=10) == -signal.SIGKILL
-    finally:
-        process.kill()
-    assert not out.exists()
-    time.sleep(0.5)
 
 
 @pytest.fixture(scope="module")
@@ -120,9 +85,9 @@ def test_units_are_kept_only_for_the_same_run(tmp_path, capsys):
     config = tmp_path / "run.toml"
     config.write_text(RUN.replace("paths = 2_560_000", "paths = 3200"))
     out = tmp_path / "t.h5"
-    plan = runner.Plan.from_config(config_module.load(config))
+    plan = Plan.from_config(config_module.load(config))
     store = unit_store.UnitStore.open(unit_store.store_path(out), plan, resume=False)
-    runner.run(config_module.load(config), store=store)  # every unit kept, no table
+    trace(config_module.load(config), store=store)  # every unit kept, no table
     store.release()  # as a run that died
     files = sorted(p.name for p in store.directory.iterdir())
     assert len(files) == UNITS + 1
@@ -145,7 +110,7 @@ def test_units_are_kept_only_for_the_same_run(tmp_path, capsys):
     assert same_table(out, fresh)
 
     store = unit_store.UnitStore.open(unit_store.store_path(out), plan, resume=False)
-    runner.run(config_module.load(config), store=store)
+    trace(config_module.load(config), store=store)
     store.release()
     assert main(["run", str(config), "--out", str(out), "--force"]) == 0
     assert "resumed" not in capsys.readouterr().out and not store.directory.exists()
@@ -155,7 +120,7 @@ def test_a_damaged_unit_file_is_never_taken(tmp_path):
     """Units are written under a temporary name and renamed: a half-written file is not a unit."""
     path = tmp_path / "run.toml"
     path.write_text(RUN)
-    plan = runner.Plan.from_config(config_module.load(path))
+    plan = Plan.from_config(config_module.load(path))
     store = unit_store.UnitStore.open(tmp_path / "units", plan, resume=False)
     (store.directory / ".r0_i0.npz.tmp").write_bytes(b"half a unit")
     assert store.saved_units() == []
@@ -163,15 +128,15 @@ def test_a_damaged_unit_file_is_never_taken(tmp_path):
 
 def test_progress_counts_resumed_units_as_done_and_times_only_the_traced(tmp_path, monkeypatch):
     """Resumed units count as done but not in the rate, nor does the first traced unit (it carries
-    the start); seconds numba spent compiling while a unit traced are not in the rate either
-    (issue 24, defect 14), and the line says so while numba compiles."""
+    the start); seconds numba spent compiling while a unit traced are not in the rate either,
+    and the line says so while numba compiles."""
     from types import SimpleNamespace
 
     from microsim.app import progress as progress_module
 
     path = tmp_path / "run.toml"
     path.write_text(RUN)
-    plan = runner.Plan.from_config(config_module.load(path))
+    plan = Plan.from_config(config_module.load(path))
     clock = [100.0]
     monkeypatch.setattr(progress_module, "time", SimpleNamespace(monotonic=lambda: clock[0]))
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True, raising=False)
@@ -203,9 +168,9 @@ def test_progress_counts_resumed_units_as_done_and_times_only_the_traced(tmp_pat
 def kept_units(config: Path, out: Path) -> list[str]:
     """Trace every unit of ``config`` into the store of ``out`` and stop there, as a run killed
     just before writing its table; the store's file names."""
-    plan = runner.Plan.from_config(config_module.load(config))
+    plan = Plan.from_config(config_module.load(config))
     store = unit_store.UnitStore.open(unit_store.store_path(out), plan, resume=False)
-    runner.run(config_module.load(config), store=store)
+    trace(config_module.load(config), store=store)
     store.release()
     return sorted(p.name for p in store.directory.iterdir())
 
@@ -220,13 +185,13 @@ def test_a_refused_resume_keeps_every_unit(tmp_path, capsys, monkeypatch):
     """Refusals (memory, a store in use by another run) come before the store is touched."""
     config, out = small_run(tmp_path), tmp_path / "t.h5"
     files = kept_units(config, out)
-    monkeypatch.setattr(runner, "available_memory", lambda: 2**20)
+    monkeypatch.setattr(memory, "available_memory", lambda: 2**20)
     capsys.readouterr()
     assert main(["run", str(config), "--out", str(out), "--resume"]) == 2
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and "GiB are free" in err[0]
     monkeypatch.undo()
-    plan = runner.Plan.from_config(config_module.load(config))
+    plan = Plan.from_config(config_module.load(config))
     holder = unit_store.UnitStore.open(unit_store.store_path(out), plan, resume=True)  # another run
     try:
         assert main(["run", str(config), "--out", str(out), "--resume"]) == 2
@@ -273,7 +238,8 @@ def test_a_signal_while_the_tables_are_written_waits_for_them():
 
 
 def test_a_full_disk_ends_the_run_in_one_line_keeping_its_units(tmp_path, capsys, monkeypatch):
-    """Issue 24, defect 6: ENOSPC in unit_store.save gave a 61-line traceback and left a .tmp file."""
+    """ENOSPC in unit_store.save ends the run in one line, keeping the units saved and leaving no
+    .tmp file."""
     import errno
 
     import numpy as np
@@ -306,8 +272,6 @@ def test_a_table_that_cannot_be_written_ends_the_run_in_one_line_keeping_every_u
 
     import h5py
 
-    from microsim import tables
-
     config = tmp_path / "run.toml"
     config.write_text(RUN.replace("paths = 2_560_000", "paths = 3200"))
     out = tmp_path / "t.h5"
@@ -315,7 +279,7 @@ def test_a_table_that_cannot_be_written_ends_the_run_in_one_line_keeping_every_u
     def full(*args, **kwargs):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr(tables.h5py.Dataset, "attrs", property(full))
+    monkeypatch.setattr(h5py.Dataset, "attrs", property(full))
     assert main(["run", str(config), "--out", str(out)]) == 1
     lines = capsys.readouterr().err.splitlines()
     store = unit_store.store_path(out)

@@ -6,13 +6,13 @@ import math
 
 import numpy as np
 import pytest
-from refusals import assert_run_refused, small_config
-from stat_bounds import chi2_bound, chi2_lower_bound
 
 from microsim import config, tables
 from microsim.core.orders import RESULT_ALL_ORDERS
 from microsim.models.radiative_transfer import single_scattering
-from microsim.run import runner
+from microsim.testing import trace
+from microsim.testing.bounds import chi2_bound, chi2_lower_bound
+from microsim.testing.refusals import assert_run_refused, small_config
 from microsim.tracer.sensor import Sensor, retro_ring
 
 REALIZATIONS = 32
@@ -25,7 +25,7 @@ def run(scene, theta, phi, rings, max_deg, paths, seed=5, albedo=0.6, cells=100)
         "sensor": {"cells": cells, "retro_rings": rings, "retro_max_deg": max_deg},
         "run": {"paths": paths, "realizations": REALIZATIONS, "seed": seed},
     })
-    return cfg, runner.run(cfg, threads=2)
+    return cfg, trace(cfg, threads=2)
 
 
 def assert_consistent(mean_z2, n):

@@ -7,28 +7,28 @@ import subprocess
 import sys
 
 import pytest
-from test_cli_run import SPHERES
-from test_resume import RUN, UNITS, kill_at_half, saved
-from test_sweep import GRID, same_table
 
 from microsim import tables
 from microsim.app import session
 from microsim.app.progress import Progress
 from microsim.cli import main
+from microsim.testing import trace_albedos
+from microsim.testing.configs import GRID, SPHERES
+from microsim.testing.interruptions import RUN, UNITS, kill_at_half, saved
+from microsim.testing.tables import same_table
 
 
 def test_a_run_from_python_is_the_command_line_s_table(tmp_path, capsys):
     """The command line runs the session too: both are also checked against the runner's
     tables written without it."""
     from microsim import config as config_module
-    from microsim.run import runner
 
     config = tmp_path / "small.toml"
     config.write_text(SPHERES)
     outcome = session.run(config, tmp_path / "python.h5", workers=2)
     assert main(["run", str(config), "--out", str(tmp_path / "cli.h5")]) == 0
     validated = config_module.load(config)
-    tables.write(tmp_path / "runner.h5", runner.run_albedos(validated)[0], validated)
+    tables.write(tmp_path / "runner.h5", trace_albedos(validated)[0], validated)
     assert outcome.tables == [tmp_path / "python.h5"]
     assert same_table(tmp_path / "python.h5", tmp_path / "cli.h5")
     assert same_table(tmp_path / "python.h5", tmp_path / "runner.h5")

@@ -1,7 +1,7 @@
 """Stopping a run: a signal to the main process alone stops every worker, writes no table, says
 so in one line and dies of the signal (as a shell expects); workers die with their parent even
-when it is killed by SIGKILL; a signal ignored at start (nohup) stays ignored (issue 9, defect
-1). Real processes: the run is started with the CLI, signalled once it has installed its
+when it is killed by SIGKILL; a signal ignored at start (nohup) stays ignored. Real
+processes: the run is started with the CLI, signalled once it has installed its
 handlers (its caught-signal mask in /proc) and its workers trace, and the process table is read
 from /proc afterwards."""
 
@@ -14,6 +14,8 @@ import time
 from pathlib import Path
 
 import pytest
+
+from microsim.testing.interruptions import interrupt_group, wait_until
 
 RUN = Path(__file__).resolve().parent.parent / "runs" / "spheres_phi030.toml"
 pytestmark = pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads the process table in /proc")
@@ -61,15 +63,6 @@ def start_run(tmp_path, *options, ignore_hup=False):
             signal.signal(signal.SIGHUP, signal.SIG_IGN)
 
     return subprocess.Popen(command, stderr=subprocess.PIPE, text=True, cwd=tmp_path, preexec_fn=dispositions), out
-
-
-def wait_until(condition, seconds: float) -> bool:
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        if condition():
-            return True
-        time.sleep(0.1)
-    return condition()
 
 
 @pytest.mark.parametrize("name", ["SIGINT", "SIGTERM", "SIGHUP", "SIGKILL"])
@@ -128,7 +121,7 @@ def test_a_signal_ignored_at_start_stays_ignored(tmp_path):
 
 @pytest.mark.parametrize("name", ["SIGINT", "SIGTERM"])
 def test_a_signal_once_the_table_is_written_leaves_a_finished_run_exiting_0(tmp_path, monkeypatch, capsys, name):
-    """Issue 24, defect 8: SIGINT just after "table written to" made a finished run die of it."""
+    """A signal just after "table written to" leaves the finished run to exit 0."""
     import click
 
     from microsim import tables
@@ -157,26 +150,6 @@ def test_a_signal_once_the_table_is_written_leaves_a_finished_run_exiting_0(tmp_
         signal.signal(signum, handler)
 
 
-def interrupt_group(command: list[str], cwd: Path, when) -> tuple[int, str]:
-    """Start ``command`` as a terminal's foreground job (a process group of its own, default
-    dispositions), send SIGINT to the whole group as Ctrl-C does once ``when(process)`` holds,
-    and return its status and stderr. Whatever is left of the group is killed."""
-    def dispositions():
-        for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-            signal.signal(signum, signal.SIG_DFL)
-
-    process = subprocess.Popen(command, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, cwd=cwd,
-                               start_new_session=True, preexec_fn=dispositions)
-    try:
-        assert wait_until(lambda: when(process), 120), "the moment to interrupt never came"
-        os.killpg(process.pid, signal.SIGINT)
-        status = process.wait(timeout=60)
-        return status, process.communicate(timeout=30)[1]
-    finally:
-        with contextlib.suppress(OSError):
-            os.killpg(process.pid, signal.SIGKILL)
-
-
 def after(seconds: float):
     start = time.monotonic()
     return lambda process: time.monotonic() - start >= seconds
@@ -184,8 +157,8 @@ def after(seconds: float):
 
 @pytest.mark.parametrize("moment", ["importing", "cluster starting", "tracing"])
 def test_ctrl_c_to_a_dask_run_s_process_group_is_one_line_whenever_it_comes(tmp_path, moment):
-    """Issue 24, defect 7: Ctrl-C to the process group printed the KeyboardInterrupt tracebacks
-    of every Dask worker (67 lines), and during the imports a traceback of the main process."""
+    """Ctrl-C to the process group of a Dask run ends it in one line whenever it comes: no
+    KeyboardInterrupt traceback of a Dask worker, nor, during the imports, of the main process."""
     pytest.importorskip("distributed")
     out = tmp_path / "stopped.h5"
     command = [sys.executable, "-m", "microsim", "run", str(RUN), "--paths", str(10**9), "--out", str(out),
@@ -219,7 +192,7 @@ def test_main_gives_the_caller_s_handlers_back_whatever_ends_it(tmp_path, monkey
     def broken(path):
         raise RuntimeError("a bug")
 
-    monkeypatch.setattr(cli, "_load_table", broken)
+    monkeypatch.setattr("microsim.cli.analysis.load_table", broken)
     defaults = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL, signal.SIGHUP: signal.SIG_DFL}
     previous = {signum: signal.signal(signum, handler) for signum, handler in defaults.items()}
     try:

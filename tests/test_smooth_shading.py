@@ -18,13 +18,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from matching_cells import RECIPROCITY_CELLS, reciprocity_z, ring_incidences
 from scipy.stats import chi2
-from test_periodic_tile_physics import ridges
 
 from microsim import config, tables
 from microsim.geometry import heightfield, periodic_tile, poisson_spheres
-from microsim.run import runner
+from microsim.testing import write_table
+from microsim.testing.reciprocity import RECIPROCITY_CELLS, reciprocity_z, ring_incidences
+from microsim.testing.surfaces import ridges
 from microsim.tracer.shapes import MIN_SHADING_COSINE, SMOOTH, Shapes, surface_point
 
 DOWN = (0.0, 0.0, -1.0)
@@ -160,7 +160,7 @@ def reciprocity_table(samples: int, tmp_path) -> tuple:
         "illumination": {"theta_i_deg": [t for _, t, _ in incidences], "phi_i_deg": [p for _, _, p in incidences]},
         "sensor": {"cells": RECIPROCITY_CELLS}, "run": {"paths": 96_000, "realizations": 16, "seed": 5}})
     path = tmp_path / "table.h5"
-    tables.write(path, runner.run(cfg), cfg)
+    write_table(cfg, path)
     table = tables.load(path)
     return table, reciprocity_z(table, incidences, table.brdf, table.brdf_stderr)
 

@@ -3,63 +3,15 @@ point run alone, bit for bit; an index; bad sweeps refused in one line before an
 
 import csv
 
-import h5py
-import numpy as np
 import pytest
 
 from microsim import config, tables
 from microsim.app.sweep import INDEX
 from microsim.cli import main
-
-BASE = """[scene]
-kind = "poisson_spheres"
-volume_fraction = 0.2
-tile = 8.0
-depth = 8.0
-[material]
-kind = "lambert"
-albedo = 0.8
-[illumination]
-theta_i_deg = [0.0, 60.0]
-[sensor]
-cells = 50
-[run]
-paths = 400
-realizations = 2
-seed = 3
-"""
-GRID = BASE + """[sweep]
-"scene.volume_fraction" = [0.1, 0.3]
-"material.albedo" = [0.5, 0.7, 0.9]
-"""
-#: provenance that differs between any two runs
-VOLATILE = {"created_utc", "wall_time_s"}
-
-
-#: attributes that hold HDF5 object references (the dimension scales')
-REFERENCES = ("DIMENSION_LIST", "REFERENCE_LIST")
-
-
-def same_table(a, b) -> bool:
-    """Whether two tables hold the same datasets (dtype, shape and bytes) and the same attributes
-    at every level, but for the provenance that differs between any two runs. The dimension
-    scales' references (object addresses, which move with anything written before them) are
-    compared as the names of the scales each axis is attached to."""
-    def contents(path):
-        items = {}
-        with h5py.File(path, "r") as h5:
-            def visit(name, obj):
-                attrs = {k: np.asarray(v).tobytes() + str(np.asarray(v).dtype).encode() for k, v in obj.attrs.items()
-                         if not (name == "" and k in VOLATILE) and k not in REFERENCES}
-                if isinstance(obj, h5py.Dataset):
-                    attrs["dimensions"] = [[scale.name for scale in axis.values()] for axis in obj.dims]
-                data = (obj.dtype.str, obj.shape, obj[()].tobytes()) if isinstance(obj, h5py.Dataset) else None
-                items[name] = (attrs, data)
-            visit("", h5)
-            h5.visititems(visit)
-        return items
-
-    return tables.load(a) is not None and contents(a) == contents(b)
+from microsim.testing.configs import GRID
+from microsim.testing.configs import SWEEP_BASE as BASE
+from microsim.testing.refusals import assert_run_refused
+from microsim.testing.tables import same_table
 
 
 def test_grid_sweep_writes_every_point_as_if_run_alone_and_an_index(tmp_path, capsys):
@@ -101,13 +53,7 @@ def test_zip_sweep_pairs_the_values(tmp_path, capsys):
     ('"material.albedo.x" = [0.5]', "material.albedo"),
 ])
 def test_bad_sweeps_are_refused_in_one_line_writing_nothing(sweep, key, tmp_path, capsys):
-    path = tmp_path / "bad.toml"
-    path.write_text(BASE + "[sweep]\n" + sweep + "\n")
-    assert main(["run", str(path), "--out", str(tmp_path / "out")]) == 2
-    captured = capsys.readouterr()
-    lines = captured.err.strip().splitlines()
-    assert len(lines) == 1 and key in lines[0] and "Traceback" not in captured.err, captured.err
-    assert list(tmp_path.iterdir()) == [path]
+    assert_run_refused(BASE + "[sweep]\n" + sweep + "\n", key, tmp_path, capsys, out="out")
 
 
 def test_a_sweep_does_not_write_into_a_directory_that_holds_files(tmp_path, capsys):

@@ -1,4 +1,4 @@
-"""Tables that xarray reads (issue 29, item 1): dimension scales and CF attributes, so that
+"""Tables that xarray reads: dimension scales and CF attributes, so that
 ``xarray.open_dataset(table, engine="h5netcdf")`` gives named dimensions and coordinates equal to
 what :func:`microsim.tables.load` reads; tables of format 1.0 still load."""
 
@@ -9,8 +9,8 @@ import pytest
 
 from microsim import config, tables
 from microsim.core import table_layout
-from microsim.run import runner
 from microsim.tables import netcdf
+from microsim.testing import write_table
 
 xr = pytest.importorskip("xarray")
 pytest.importorskip("h5netcdf")
@@ -41,7 +41,7 @@ def table(request, tmp_path_factory):
         "run": {"paths": 2000, "realizations": 2, "seed": 1},
     })
     path = tmp_path_factory.mktemp(request.param) / "table.h5"
-    return tables.write(path, runner.run(cfg), cfg)
+    return write_table(cfg, path)
 
 
 def test_xarray_reads_every_dataset_of_every_group_as_tables_load_does(table):

@@ -1,4 +1,4 @@
-"""The tabulated BRDF (issue 29, items 2 and 3): a full-BRDF table read at any pair of
+"""The tabulated BRDF: a full-BRDF table read at any pair of
 directions, against its source (a plane's exact albedo / pi, a held-out incidence of Boolean
 spheres, its own albedos), table against table cell by cell, and its sampling against its pdf."""
 
@@ -6,18 +6,19 @@ import dataclasses
 
 import numpy as np
 import pytest
-from refusals import assert_run_refused, small_config
 from scipy.stats import chi2 as chi2_distribution
 
-from microsim import config, tables
+from microsim import config
 from microsim.analysis import compare
+from microsim.analysis.averages import CellRule
 from microsim.cli import main
 from microsim.config import full_brdf
 from microsim.config.full_brdf import MAX_COS_GAP
 from microsim.core import table_noise
 from microsim.core.frames import direction
 from microsim.models.tabulated import TabulatedBRDF
-from microsim.run import runner
+from microsim.testing import trace_table
+from microsim.testing.refusals import assert_run_refused, small_config
 from microsim.tracer.sensor import Sensor
 
 SPHERES = {
@@ -28,9 +29,8 @@ SPHERES = {
 
 
 def traced(directory, name, illumination, paths, seed, base=SPHERES):
-    cfg = config.validate({**base, "illumination": illumination, "run": {"paths": paths, "realizations": 8,
-                                                                         "seed": seed}})
-    return tables.load(tables.write(directory / f"{name}.h5", runner.run(cfg), cfg))
+    return trace_table({**base, "illumination": illumination, "run": {"paths": paths, "realizations": 8, "seed": seed}},
+                       directory / f"{name}.h5")
 
 
 @pytest.fixture(scope="module")
@@ -156,7 +156,7 @@ def test_two_seeds_agree_cell_by_cell_with_both_errors(full, tmp_path):
     p = full.projected_solid_angle
     chi2, commons, kurtoses, correlated = [], [], [], 0.0
     for wi in full.wi[::3]:
-        rule = compare.CellRule(full.sensor, wi, np.full(full.sensor.n_cells, 8))
+        rule = CellRule(full.sensor, wi, np.full(full.sensor.n_cells, 8))
         one, two = first.cell_average_noise(rule, p), second.cell_average_noise(rule, p)
         lit = (one.averages > 0) & (two.averages > 0)
         variance = one.variance + two.variance

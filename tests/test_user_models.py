@@ -1,16 +1,16 @@
-"""A user's own model, compared and fitted from Python and from the command line (issue 24,
-defect 13 and acceptance c): a plain function, and a BRDFModel subclass in a file or a module."""
+"""A user's own model, compared and fitted from Python and from the command line: a plain
+function, and a BRDFModel subclass in a file or a module."""
 
 import json
 import math
 
 import numpy as np
 import pytest
-from test_compare import write_plane_table
 
 from microsim import models, tables
 from microsim.analysis import compare, fit
 from microsim.cli import main
+from microsim.testing.tables import write_plane_table
 
 MODEL_FILE = '''
 import numpy as np
@@ -114,7 +114,8 @@ def test_a_user_model_that_cannot_be_used_is_refused_in_one_line(plane, tmp_path
 
 
 def test_directions_are_normalised_and_a_null_direction_is_refused():
-    """Defect 13: m([0, 0, 2], [0, 0, 1]) gave 0.079 against 0.121."""
+    """A model normalises its directions (m([0, 0, 2], [0, 0, 1]) is m([0, 0, 1], [0, 0, 1])) and
+    refuses a null one."""
     model = models.create("oren_nayar", albedo=0.8, roughness=0.3)
     wi = np.array([0.3, -0.2, 0.9])
     wo = np.array([-0.5, 0.1, 0.6])

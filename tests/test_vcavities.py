@@ -1,7 +1,7 @@
-"""V-cavity surfaces (issue 11): the scene, exact single scattering against the microfacet models
+"""V-cavity surfaces: the scene, exact single scattering against the microfacet models
 with the Torrance-Sparrow G, energy, reciprocity, limits, the two intersectors and bad input.
 
-Single scattering (acceptance a, b). With ``max_order = 1`` the table's order 1 is the single
+Single scattering. With ``max_order = 1`` the table's order 1 is the single
 scattering of the explicit grooves. For a groove of facet m, light from i lights its facet m from
 the rim down to the fraction G1(i, m) = min(1, 2 (n.m)(n.i) / (i.m)) of its length, and the
 viewer o sees it from the rim down to G1(o, m); a direction on the other side of the groove sees
@@ -9,7 +9,7 @@ all of it (G1 = 1 there). Both fractions start at the same rim, so the lit and s
 min(G1(i, m), G1(o, m)): the Torrance-Sparrow G (Eq. 14) is exact for V-cavities at every azimuth,
 including out of the incidence plane and at grazing angles, and the checks below find no
 disagreement. Each case is judged over the cells with signal (table > 3 standard errors) by the
-mean z^2 per cell, within ``stat_bounds.chi2_bound`` / ``chi2_lower_bound`` (each z is Student-t
+mean z^2 per cell, within ``microsim.testing.bounds.chi2_bound`` / ``chi2_lower_bound`` (each z is Student-t
 with R - 1 degrees of freedom; the bounds are the expected mean z^2 +- 5 standard deviations of
 that mean over the cells). A realization is an independent batch of paths (nothing random is
 drawn per realization), so the cells' z's are independent but for the shared normalisation.
@@ -23,60 +23,35 @@ import math
 import numba
 import numpy as np
 import pytest
-from matching_cells import RECIPROCITY_CELLS, reciprocity_z, ring_incidences
-from refusals import assert_run_refused, small_config
-from stat_bounds import chi2_bound, chi2_lower_bound
-from thread_identity import assert_bit_identical_for_threads
 
 from microsim import config, geometry, models
-from microsim.analysis.compare import cell_averages
 from microsim.core.tally import SEGMENTS
 from microsim.physics import distributions as nd
 from microsim.physics.fresnel import fresnel_array
 from microsim.physics.rng import path_state
-from microsim.run import executors, runner
+from microsim.run import executors
+from microsim.run.plan import Plan
+from microsim.testing import trace, trace_table
+from microsim.testing.bounds import chi2_bound, chi2_lower_bound
+from microsim.testing.reciprocity import RECIPROCITY_CELLS, reciprocity_z, ring_incidences
+from microsim.testing.refusals import assert_run_refused, small_config
+from microsim.testing.threads import assert_bit_identical_for_threads
+from microsim.testing.vcavities import (
+    CELLS,
+    CONDUCTOR,
+    DIELECTRIC,
+    DIFFUSE_FACETS,
+    DIFFUSE_PATHS,
+    DIFFUSE_PHI,
+    DIFFUSE_THETA,
+    REALIZATIONS,
+    SIGNAL,
+    assert_order1_matches,
+    order1_agreement,
+    vcavity_config,
+)
 from microsim.tracer.integrators.vcavity import VCavityTracer
 from microsim.tracer.sensor import Sensor
-
-CONDUCTOR = {"kind": "conductor", "eta": 0.2, "k": 3.9}
-#: dielectric-reflection facets: an interface of index 1.5 over a black body reflects F(i.h) alone
-DIELECTRIC = {"kind": "interfaced_lambert", "albedo": 0.0, "eta": 1.5}
-THETA_I = [0.0, 45.0, 70.0, 85.0]
-CELLS = 400
-REALIZATIONS = 32
-SIGNAL = 3.0
-
-
-def vcavity_config(material, distribution="beckmann", roughness=(0.3, 0.3), theta=THETA_I, phi=None,
-                   paths=2_000_000, realizations=REALIZATIONS, max_order=1, cells=CELLS, seed=3, **scene):
-    return config.validate({
-        "scene": {"kind": "vcavities", "distribution": distribution, "roughness_x": roughness[0],
-                  "roughness_y": roughness[1], **scene},
-        "material": material,
-        "illumination": {"theta_i_deg": list(theta), "phi_i_deg": list(phi) if phi is not None else [0.0] * len(theta)},
-        "sensor": {"cells": cells},
-        "run": {"paths": paths, "realizations": realizations, "seed": seed, "max_order": max_order},
-    })
-
-
-def order1_agreement(result, model, i):
-    """(cells with signal, mean z^2 over them, median |sim / model - 1| over them) of order 1
-    against the cell-averaged model, incidence i."""
-    sim, stderr = result.brdf[i].mean[0], result.brdf[i].stderr[0]
-    modelled, _ = cell_averages(model, result.sensor, result.plan.incidence_direction(i), stderr)
-    signal = (stderr > 0) & (sim > SIGNAL * stderr)
-    sim, stderr, modelled = sim[signal], stderr[signal], modelled[signal]
-    return int(signal.sum()), float(np.mean(((sim - modelled) / stderr) ** 2)), float(np.median(np.abs(sim / modelled - 1)))
-
-
-def assert_order1_matches(result, model, realizations=REALIZATIONS):
-    """Mean z^2 of order 1 against the cell-averaged model within the two-sided bounds, per incidence."""
-    for i in range(result.plan.n_incidences):
-        n, z2, _ = order1_agreement(result, model, i)
-        assert n >= 10
-        assert chi2_lower_bound(n, realizations) <= z2 <= chi2_bound(n, realizations), \
-            (np.degrees(result.plan.theta_i[i]), n, z2)
-
 
 # ---------------------------------------------------------------- the facet slopes
 
@@ -133,7 +108,7 @@ def test_anisotropic_ggx_slopes_are_the_isotropic_ones_stretched():
 @pytest.mark.parametrize("roughness", [0.1, 0.3, 0.7])
 @pytest.mark.slow
 def test_conductor_facets_single_scattering_is_torrance_sparrow(distribution, roughness):
-    result = runner.run(vcavity_config(CONDUCTOR, distribution, (roughness, roughness)))
+    result = trace(vcavity_config(CONDUCTOR, distribution, (roughness, roughness)))
     model = models.create("microfacet", distribution=distribution, roughness=roughness, gaf="torrance_sparrow",
                           eta=0.2, k=3.9)
     assert_order1_matches(result, model)
@@ -141,7 +116,7 @@ def test_conductor_facets_single_scattering_is_torrance_sparrow(distribution, ro
 
 @pytest.mark.slow
 def test_anisotropic_conductor_facets_at_phi_0_and_90():
-    result = runner.run(vcavity_config(CONDUCTOR, "beckmann", (0.2, 0.6), theta=[45.0, 45.0, 85.0, 85.0],
+    result = trace(vcavity_config(CONDUCTOR, "beckmann", (0.2, 0.6), theta=[45.0, 45.0, 85.0, 85.0],
                                        phi=[0.0, 90.0, 0.0, 90.0]))
     model = models.create("microfacet", distribution="beckmann", roughness_x=0.2, roughness_y=0.6,
                           gaf="torrance_sparrow", eta=0.2, k=3.9)
@@ -151,7 +126,7 @@ def test_anisotropic_conductor_facets_at_phi_0_and_90():
 @pytest.mark.parametrize("distribution", ["beckmann", "ggx"])
 @pytest.mark.slow
 def test_dielectric_reflection_facets_single_scattering_is_torrance_sparrow(distribution):
-    result = runner.run(vcavity_config(DIELECTRIC, distribution, (0.3, 0.3)))
+    result = trace(vcavity_config(DIELECTRIC, distribution, (0.3, 0.3)))
     model = models.create("microfacet", distribution=distribution, roughness=0.3, gaf="torrance_sparrow", eta=1.5)
     assert_order1_matches(result, model)
 
@@ -160,7 +135,7 @@ def test_dielectric_reflection_facets_single_scattering_is_torrance_sparrow(dist
 def test_the_check_sees_a_wrong_masking_function():
     """Power: the same table against the Smith G (the V-cavity surface is not a Smith surface)
     lies above the upper bound at grazing incidence, while the Torrance-Sparrow G is within it."""
-    result = runner.run(vcavity_config(CONDUCTOR, "beckmann", (0.7, 0.7), theta=[85.0]))
+    result = trace(vcavity_config(CONDUCTOR, "beckmann", (0.7, 0.7), theta=[85.0]))
     for gaf, consistent in (("torrance_sparrow", True), ("smith", False)):
         model = models.create("microfacet", distribution="beckmann", roughness=0.7, gaf=gaf, eta=0.2, k=3.9)
         n, z2, _ = order1_agreement(result, model, 0)
@@ -169,19 +144,12 @@ def test_the_check_sees_a_wrong_masking_function():
 
 # ---------------------------------------------------------------- b: diffuse facets
 
-#: (facet material, the model's eta, distribution, roughness) of item b, its incidences and paths
-DIFFUSE_FACETS = [
-    ({"kind": "lambert", "albedo": 0.7}, 1.0, "beckmann", (0.5, 0.5)),
-    ({"kind": "lambert", "albedo": 0.7}, 1.0, "ggx", (0.3, 0.8)),
-    ({"kind": "interfaced_lambert", "albedo": 0.7, "eta": 1.5}, 1.5, "beckmann", (0.5, 0.5)),
-]
-DIFFUSE_THETA, DIFFUSE_PHI, DIFFUSE_PATHS = [0.0, 60.0, 85.0, 85.0], [0.0, 0.0, 0.0, 90.0], 400_000
 
 
 @pytest.mark.parametrize("material,eta,distribution,roughness", DIFFUSE_FACETS)
 @pytest.mark.slow
 def test_diffuse_facets_single_scattering_is_the_eq_2_integral(material, eta, distribution, roughness):
-    result = runner.run(vcavity_config(material, distribution, roughness, theta=DIFFUSE_THETA, phi=DIFFUSE_PHI,
+    result = trace(vcavity_config(material, distribution, roughness, theta=DIFFUSE_THETA, phi=DIFFUSE_PHI,
                                        paths=DIFFUSE_PATHS))
     model = models.create("interfaced_lambert", albedo=0.7, eta=eta, distribution=distribution,
                           roughness_x=roughness[0], roughness_y=roughness[1], gaf="torrance_sparrow")
@@ -204,7 +172,7 @@ def test_white_and_mirror_facets_return_every_unit_of_energy(material, distribut
     for roughness, most_truncated in ((0.2, 0.0), (1.5, 1e-3 if deep else 0.0)):
         cfg = vcavity_config(material, distribution, (roughness, roughness), theta=[0.0, 60.0, 85.0, 89.0],
                              paths=40_000, realizations=4, max_order=0, cells=100)
-        result = runner.run(cfg)
+        result = trace(cfg)
         for i in range(4):
             transmitted, truncated, absorbed, balance = result.energy[i].mean
             assert abs(result.albedo[i].mean[4] + truncated - 1.0) <= 1e-6
@@ -259,7 +227,7 @@ def test_two_mirror_bounces_match_an_independent_brute_force():
     caustic of geometry/vcavities.py, which the brute force shows as well."""
     theta, phi = 30.0, 40.0
     realizations, paths = 16, 1_600_000
-    result = runner.run(vcavity_config({"kind": "mirror"}, "beckmann", (0.5, 1.0), theta=[theta], phi=[phi],
+    result = trace(vcavity_config({"kind": "mirror"}, "beckmann", (0.5, 1.0), theta=[theta], phi=[phi],
                                        paths=paths, realizations=realizations, max_order=2, cells=100, seed=4))
     sensor = result.sensor
     wi = result.plan.incidence_direction(0)
@@ -301,7 +269,7 @@ def test_orders_1_and_2_give_f2_with_their_own_error_and_compare_reads_them(simu
     assert np.allclose(a["brdf_orders12"], f2, rtol=1e-12, atol=0.0)
     assert np.allclose(a["albedo_orders12"], a["albedo_order"][:, :2].sum(axis=1), rtol=1e-12)
     # the error of each realization's f2, recomputed from the units' own tallies
-    plan = runner.Plan.from_config(config.validate(settings))
+    plan = Plan.from_config(config.validate(settings))
     per_unit = {0: [], 1: []}
     executors.trace_units(plan, plan.units, lambda unit, tally, info: per_unit[unit[1]].append(
         (tally.estimates[0].weight[0, 0] + tally.estimates[0].weight[0, 1]) / tally.paths / table.projected_solid_angle))
@@ -333,15 +301,12 @@ def test_orders_1_and_2_give_f2_with_their_own_error_and_compare_reads_them(simu
 @pytest.fixture(scope="module")
 def reciprocity_table(tmp_path_factory):
     """All orders on anisotropic Lambertian grooves, incidences at ring centres x phi_i {0, 90} deg."""
-    from microsim import tables
 
     incidences = ring_incidences()
     cfg = vcavity_config({"kind": "lambert", "albedo": 0.8}, "beckmann", (0.4, 1.0),
                          theta=[t for _, t, _ in incidences], phi=[p for _, _, p in incidences],
                          paths=2_000_000, realizations=16, max_order=0, cells=RECIPROCITY_CELLS)
-    path = tmp_path_factory.mktemp("vcavity_reciprocity") / "table.h5"
-    tables.write(path, runner.run(cfg), cfg)
-    return tables.load(path), incidences
+    return trace_table(cfg, tmp_path_factory.mktemp("vcavity_reciprocity") / "table.h5"), incidences
 
 
 @pytest.mark.slow
@@ -365,7 +330,7 @@ def test_isotropic_table_is_reciprocal():
     cfg = vcavity_config({"kind": "interfaced_lambert", "albedo": 0.8, "eta": 1.5}, "ggx", (0.6, 0.6),
                          theta=[t for _, t, _ in incidences], paths=1_000_000, realizations=16, max_order=0,
                          cells=RECIPROCITY_CELLS)
-    result = runner.run(cfg)
+    result = trace(cfg)
 
     class Cells:  # the two arrays reciprocity_z reads, from the run's estimates
         sensor = result.sensor
@@ -383,7 +348,7 @@ def test_nearly_flat_lambertian_grooves_are_the_lambertian_plane():
     from scipy.stats import t as student
 
     realizations = 16
-    result = runner.run(vcavity_config({"kind": "lambert", "albedo": 0.6}, "beckmann", (0.001, 0.001),
+    result = trace(vcavity_config({"kind": "lambert", "albedo": 0.6}, "beckmann", (0.001, 0.001),
                                        theta=[0.0, 45.0, 80.0], paths=1_000_000, realizations=realizations,
                                        max_order=0, cells=100))
     z = np.concatenate([(e.mean[4] - 0.6 / math.pi) / e.stderr[4] for e in result.brdf])
@@ -398,7 +363,7 @@ def test_nearly_flat_conductor_grooves_put_all_energy_in_the_specular_cell():
     roughness 0.001, as the table shows: 0.9512 of 0.9520 at normal incidence.)"""
     sensor = Sensor.build(CELLS)
     theta = np.degrees(sensor.ring_centres()[[0, 4, 8]])
-    result = runner.run(vcavity_config(CONDUCTOR, "beckmann", (0.001, 0.001), theta=theta, paths=200_000,
+    result = trace(vcavity_config(CONDUCTOR, "beckmann", (0.001, 0.001), theta=theta, paths=200_000,
                                        realizations=8, max_order=0))
     for i in range(3):
         wi = result.plan.incidence_direction(i)
@@ -421,7 +386,7 @@ def test_embree_and_analytic_intersectors_trace_the_same_grooves():
         embree.load()
     except embree.EmbreeUnavailable as err:
         pytest.skip(f"the embree intersector needs the direct Embree binding: {err}")
-    results = {name: runner.run(vcavity_config({"kind": "lambert", "albedo": 0.8}, "beckmann", (0.5, 0.5),
+    results = {name: trace(vcavity_config({"kind": "lambert", "albedo": 0.8}, "beckmann", (0.5, 0.5),
                                                theta=[0.0, 80.0], paths=200_000, realizations=4, max_order=0,
                                                cells=100, intersector=name))
                for name in ("analytic", "embree")}

@@ -9,7 +9,7 @@ import numpy as np
 
 from microsim import config
 from microsim.physics.rng import geometry_rng
-from microsim.run import runner
+from microsim.run.plan import Plan
 from microsim.tracer import embree
 from microsim.tracer.estimators import DEFAULT, build
 from microsim.tracer.integrators.direct import DirectWorld
@@ -90,7 +90,7 @@ def sphere_scene():
         "scene": {"kind": "poisson_spheres", "volume_fraction": 0.3, "tile": 8.0, "depth": 4.0},
         "material": {"kind": "lambert", "albedo": 0.5}, "illumination": {"theta_i_deg": [0.0]},
         "sensor": {"cells": 10}, "run": {"paths": 100, "realizations": 2, "seed": 4}})
-    plan = runner.Plan.from_config(cfg)
+    plan = Plan.from_config(cfg)
     return plan.generator.generate(plan.scene, plan.config, geometry_rng(4, 0))
 
 

@@ -23,13 +23,13 @@ independent cells would give it an error.
 
 Every cell is fitted, the model averaged over each cell as ``compare`` does: with variances from
 the model, a cell's residual needs no error of its own, and choosing the cells by their own
-value biases the fit, as choosing them by their own error did: fitting only the cells with
-signal (table > ``compare.SIGNAL_TO_NOISE`` standard errors, as compare reports them) biased the
+value biases the fit, as weighing them by their own error does: fitting only the cells with
+signal (table > ``selection.SIGNAL_TO_NOISE`` standard errors, as compare reports them) biases the
 fit high, since near the threshold the cells kept are those that fluctuated up. The cells with
 signal only pool the paths' dispersion k (a ratio of sums), and an incidence without any is left
 out. The quadrature each cell needs is found once, at the starting
-parameters (``compare.refined_cell_averages``), and held fixed while the parameters move
-(``compare.CellRule``), so the residuals are smooth in them. Its tolerance is compare's
+parameters (``averages.refined_cell_averages``), and held fixed while the parameters move
+(``averages.CellRule``), so the residuals are smooth in them. Its tolerance is compare's
 (``QUADRATURE_TOLERANCE`` standard errors a cell) divided by the square root of the N cells
 fitted: quadrature errors can share their sign over many cells, and N cells each off by t
 standard errors in the same direction would move a fitted scale by about t sqrt(N) of its
@@ -39,18 +39,18 @@ whether the model describes the table: near 1 if it does, far above 1 if not, an
 reports it whatever it is. Its degrees of freedom are the cells' expected shares of chi-square,
 less the free parameters: a cell whose model value m_C lies under the variance floor adds m_C /
 floor in expectation, not 1 (sum_C min(1, m_C / floor) - parameters; a dark cell counted whole
-sank an exact model's chi-square per degree of freedom far below 1). The best model is then
-compared with the table exactly as ``compare`` does.
+would sink an exact model's chi-square per degree of freedom far below 1). The best model is
+then compared with the table exactly as ``compare`` does.
 
-(measurements of the rejected weights, covariance and choice of cells: docs/developer/performance.md,
-section 'Fits and chi-square: weights, covariance and cells (issue 24)')
+(measurements of the weights, covariance and choice of cells tried: docs/developer/performance.md,
+section 'Fits and chi-square: weights, covariance and cells')
 
 ``on="retro"`` (``--retro``) fits the retro rings instead, as the cells: a ring is a bin that the
 paths exit into, weighed by the variance the model predicts from the cells' dispersion (the same
 paths), every ring above the horizon of the incidences whose cells have signal, each averaged by
-a rule found at the starting parameters and held fixed (``compare.RingRule``). ``on="points"``
+a rule found at the starting parameters and held fixed (``averages.RingRule``). ``on="points"``
 (``--points``) fits next-event estimation's f at the table's points (nothing predicts a point's
-variance; an exact point, without spread, is weighed by ``compare.EXACT_POINT`` of its value; a
+variance; an exact point, without spread, is weighed by ``compare_points.EXACT_POINT`` of its value; a
 point where the table holds 0 without spread is left out): the weights are fixed, and one solve
 ends the fit. The points of an incidence share their paths. Where the table holds the covariance
 C of their mean (``brdf_points_covariance``, from R realizations), the fit is generalized least
@@ -60,11 +60,9 @@ weighed by c / eigenvalue (weights c C^+), and the parameters' covariance is Gau
 (J^T W J)^-1. C is estimated: for normal realizations the fit's true covariance is (m - 1) /
 (m - 1 - k + p) times that of a known C (m = R - 1, p parameters) while (J^T C^+ J)^-1 is (m - k
 + p) / m of it in expectation (both checked on a normal simulation to 1 %), so with c = 1 the
-errors ran low: the albedo of a half space at order 1 (2 incidences of 6 to 7 directions) fell
-at (value - truth) / error of standard deviation 1.85 (40 tables, R = 16) and 1.38 (40, R =
-32). c = (m - k + p)(m - 1 - k + p) / (m (m - 1)) (:func:`estimated_weights`) brought them to
-1.16 (60 tables, R = 16) and 1.10 (30, R = 32), where the normal simulation gives 1.12 and 1.03
-(the spread of the errors' own estimate). Chi-square is the sum of the incidences' T^2 at the best fit, over
+errors would run low. c = (m - k + p)(m - 1 - k + p) / (m (m - 1)) (:func:`estimated_weights`)
+gives errors as calibrated as a normal simulation's (figures: docs/validation/statistics.md,
+'Fits at points'). Chi-square is the sum of the incidences' T^2 at the best fit, over
 sum k less the free parameters; each T^2 has mean k (R - 1) / (R - k - 2) for an exact model,
 so chi-square per degree of freedom near (R - 1) / (R - k - 2) is a good fit (1.9 at R = 16, k =
 6). An incidence with as many points with spread as realizations or more (C of rank R - 1 at
@@ -75,9 +73,9 @@ parameter's row a of the least-squares solution and the points' errors s (for in
 sqrt(sum_j a_j^2 s_j^2), up to sqrt(n) times smaller), with degrees of freedom the points less
 the free parameters and chi-square per degree of freedom counting z^2, each of mean (R - 1) /
 (R - 3) for an exact model. The key ``fit_points_weights`` says which ("covariance" or
-"bounding", with ``fit_points_weights_note``); on the half space at order 1 (16 realizations
-of 1 000 paths, 7 and 8 points), the covariance gave the albedo 0.89993 +- 0.00010 where the
-bound was +- 0.0041. The best model is compared as ``compare`` compares on the same."""
+"bounding", with ``fit_points_weights_note``); the covariance's errors are far smaller than the
+bound's (docs/validation/statistics.md, 'Fits at points'). The best model is compared as
+``compare`` compares on the same."""
 
 from __future__ import annotations
 
@@ -90,6 +88,9 @@ from scipy.optimize import least_squares
 
 from microsim import models
 from microsim.analysis import compare
+from microsim.analysis.averages import QUADRATURE_TOLERANCE, CellRule, RingRule, refined_cell_averages, ring_averages
+from microsim.analysis.compare_points import EXACT_POINT, PointComparison, retro_sensor
+from microsim.analysis.selection import extra_selection, points_covariance, repeated_points, selection, with_signal
 from microsim.core import table_noise
 
 #: open ends of a parameter's range are kept this fraction of the range (or absolutely) inside
@@ -109,7 +110,7 @@ class Fit:
     chi2_per_dof: float | None  # None without degrees of freedom
     dof: float  # the cells' (rings') expected share of chi-square or the points, less the free parameters (>= 0)
     evaluations: int
-    comparison: compare.Comparison | compare.PointComparison
+    comparison: compare.Comparison | PointComparison
     notes: dict = field(default_factory=dict)  # keys added to as_dict (how the points were weighed)
 
     def as_dict(self) -> dict:
@@ -243,22 +244,22 @@ class _Fitted:
 
 def _cells(table, first, order: str, n_free: int) -> _Fitted:
     """The cells to fit (module doc), their quadrature found for the model ``first``."""
-    _, sim, stderr, albedo, albedo_stderr = compare.selection(table, order)  # checks the order and the values
-    signal = compare.with_signal(sim, stderr)
+    _, sim, stderr, albedo, albedo_stderr = selection(table, order)  # checks the order and the values
+    signal = with_signal(sim, stderr)
     if signal.sum() <= n_free:
         raise ValueError(f"table {table.path}: {int(signal.sum())} cells with signal, too few to fit "
                          f"{n_free} parameters")
     # every cell, none chosen by its own value (module doc), of the incidences whose cells with
     # signal tell the paths' dispersion
     fitted = np.broadcast_to(signal.any(axis=1)[:, None], signal.shape)
-    tolerance = compare.QUADRATURE_TOLERANCE / math.sqrt(fitted.sum())
-    rules = [compare.CellRule(table.sensor, wi,
-                              compare.refined_cell_averages(first, table.sensor, wi, stderr[i], tolerance)[2])
+    tolerance = QUADRATURE_TOLERANCE / math.sqrt(fitted.sum())
+    rules = [CellRule(table.sensor, wi,
+                              refined_cell_averages(first, table.sensor, wi, stderr[i], tolerance)[2])
              for i, wi in enumerate(table.wi)]
     incidence = np.nonzero(fitted)[0]  # the incidence of each fitted cell
     dispersion, floor = table_noise.variance_model(sim, stderr, signal, table.projected_solid_angle)
     scale = table_noise.realization_scale(sim, stderr, albedo, albedo_stderr, table.projected_solid_angle,
-                                          table.paths, compare.realizations(table))
+                                          table.paths, table_noise.realizations(table))
     return _Fitted(sim[fitted], stderr[fitted], incidence,
                    lambda model: np.concatenate([rule.averages(model)[fitted[i]] for i, rule in enumerate(rules)]),
                    (dispersion[:, None] / table.projected_solid_angle)[fitted], floor[incidence], scale)
@@ -266,23 +267,23 @@ def _cells(table, first, order: str, n_free: int) -> _Fitted:
 
 def _rings(table, first, order: str, n_free: int) -> _Fitted:
     """The retro rings to fit (module doc), their quadrature found for the model ``first``."""
-    sim, stderr = compare.extra_selection(table, order, "retro")
-    sensor = compare.retro_sensor(table)
+    sim, stderr = extra_selection(table, order, "retro")
+    sensor = retro_sensor(table)
     projected = table.arrays["sensor/retro_projected_solid_angle"]
-    _, cells, cells_stderr, albedo, albedo_stderr = compare.selection(table, order)
-    cells_signal = compare.with_signal(cells, cells_stderr)
-    signal = compare.with_signal(sim, stderr) & (projected > 0)
+    _, cells, cells_stderr, albedo, albedo_stderr = selection(table, order)
+    cells_signal = with_signal(cells, cells_stderr)
+    signal = with_signal(sim, stderr) & (projected > 0)
     if signal.sum() <= n_free:
         raise ValueError(f"--retro: table {table.path}: {int(signal.sum())} retro rings with signal, too few to fit "
                          f"{n_free} parameters")
     fitted = (projected > 0) & cells_signal.any(axis=1)[:, None]
-    tolerance = compare.QUADRATURE_TOLERANCE / math.sqrt(fitted.sum())
-    rules = [compare.RingRule(sensor, wi, compare.ring_averages(first, sensor, wi, stderr[i], tolerance)[2])
+    tolerance = QUADRATURE_TOLERANCE / math.sqrt(fitted.sum())
+    rules = [RingRule(sensor, wi, ring_averages(first, sensor, wi, stderr[i], tolerance)[2])
              for i, wi in enumerate(table.wi)]
     incidence = np.nonzero(fitted)[0]
     dispersion, floor = table_noise.variance_model(cells, cells_stderr, cells_signal, table.projected_solid_angle)
     scale = table_noise.realization_scale(cells, cells_stderr, albedo, albedo_stderr, table.projected_solid_angle,
-                                          table.paths, compare.realizations(table))
+                                          table.paths, table_noise.realizations(table))
     return _Fitted(sim[fitted], stderr[fitted], incidence,
                    lambda model: np.concatenate([rule.averages(model)[fitted[i]] for i, rule in enumerate(rules)]),
                    dispersion[incidence] / projected[fitted], floor[incidence], scale)
@@ -290,10 +291,10 @@ def _rings(table, first, order: str, n_free: int) -> _Fitted:
 
 def _points(table, first, order: str, n_free: int) -> _Fitted:
     """The points to fit (module doc); ``first`` is not needed (no quadrature)."""
-    sim, stderr = compare.extra_selection(table, order, "points")
+    sim, stderr = extra_selection(table, order, "points")
     directions = table.arrays["sensor/points_direction"]
-    error = np.maximum(stderr, compare.EXACT_POINT * np.abs(sim))
-    fitted = (error > 0) & ~compare.repeated_points(directions)
+    error = np.maximum(stderr, EXACT_POINT * np.abs(sim))
+    fitted = (error > 0) & ~repeated_points(directions)
     if fitted.sum() <= n_free:
         raise ValueError(f"--points: table {table.path}: {int(fitted.sum())} points with a value, too few to fit "
                          f"{n_free} parameters")
@@ -312,14 +313,14 @@ def _whitening(table, order, sim, stderr, fitted, n_free):
     ``counted``: c on the incidences' rows, 0 on the exact points'. (None, None, notes) without the
     covariance, or where an incidence has as many points with spread as realizations or more, or
     too many for the estimated weights (c <= 0)."""
-    covariance = compare.points_covariance(table, order)
-    realizations = compare.realizations(table)
+    covariance = points_covariance(table, order)
+    realizations = table_noise.realizations(table)
     bounding = ("each point weighed by its own standard error; parameter errors that hold whatever the "
                 "correlation")
     if covariance is None:
         return None, None, {"fit_points_weights": "bounding", "fit_points_weights_note": "the table holds no "
                             f"brdf_points_covariance: {bounding}"}
-    noisy = fitted & (stderr > compare.EXACT_POINT * np.abs(sim))
+    noisy = fitted & (stderr > EXACT_POINT * np.abs(sim))
     column = np.full(sim.shape, -1)
     column[fitted] = np.arange(int(fitted.sum()))
     rows, counted = [], []
@@ -343,7 +344,7 @@ def _whitening(table, order, sim, stderr, fitted, n_free):
             counted += [c] * k
         for j in np.flatnonzero(fitted[i] & ~noisy[i]):
             row = np.zeros((1, int(fitted.sum())))
-            row[0, column[i, j]] = 1.0 / (compare.EXACT_POINT * abs(sim[i, j]))
+            row[0, column[i, j]] = 1.0 / (EXACT_POINT * abs(sim[i, j]))
             rows.append(row)
             counted.append(0.0)
     return np.concatenate(rows), np.array(counted), {"fit_points_weights": "covariance"}
@@ -423,8 +424,9 @@ DECADES_RATIO = 100.0
 
 def _start(param, given) -> float:
     """The starting value: the one given, else the default, else 1 for a positive range of
-    decades that holds it (a ratio or a slope: beta in [0.001, 1000] started at 500, where a fit
-    of micrograins did not end in 120 s; issue 24), else the middle of a finite range."""
+    decades that holds it (a ratio or a slope: the middle of beta in [0.001, 1000], 500, starts a
+    fit of micrograins so far from its answer that it does not end in minutes), else the middle
+    of a finite range."""
     if given is not None:
         return param.check(given)
     if isinstance(param.default, (int, float)) and not isinstance(param.default, bool):

@@ -24,8 +24,8 @@ RING_PIECES = 96
 
 def polar_cells(ax, sensor, values, cmap, norm):
     """Draw every sensor cell on polar axes (angle = phi, radius = theta in degrees): one
-    pcolormesh per ring (a few ms each; a bar per cell took 16 s a figure at 3240 cells), each
-    cell cut into enough pieces in phi that its arcs stay round."""
+    pcolormesh per ring (a few ms each; a bar per cell is far slower: docs/developer/performance.md,
+    'The time left and the figures'), each cell cut into enough pieces in phi that its arcs stay round."""
     edges = np.degrees(sensor.ring_theta_bounds())
     for k in range(sensor.n_rings):
         count, first = int(sensor.ring_counts[k]), int(sensor.ring_start[k])

@@ -46,10 +46,10 @@ class ProgressBar(Progress):
     units and paths per incidence, as ``--paths`` does. Its time left is the mean rate of the
     units traced since the first one ended, without the seconds spent compiling, applied to what
     is left: the first unit carries the start (forking workers, building their first scenes),
-    which made the first estimates of a run on 2 workers 4.4 times the true time left (measured
-    by benchmarks/first_run.py); a mean rate is steadier than a recent one when units end in
-    bursts, as they do with workers. Units taken from a resumed run's store count as done, not
-    in the rate."""
+    which would make the first estimates several times the true time left
+    (docs/developer/performance.md, 'The time left and the figures'); a mean rate is steadier
+    than a recent one when units end in bursts, as they do with workers. Units taken from a
+    resumed run's store count as done, not in the rate."""
 
     def __init__(self):
         self.bar = None

@@ -19,13 +19,13 @@ run that could not finish (exit 1: what was kept is said), :class:`Stopped` for 
 from __future__ import annotations
 
 import copy
-import math
 import os
 import re
 import shutil
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
+from microsim.app.outcomes import PointOutcome, RunOutcome, SweepOutcome
 from microsim.app.progress import Progress
 from microsim.core import files
 from microsim.core.choices import EXECUTORS, MAX_THREADS, MAX_WORKERS
@@ -39,11 +39,6 @@ __all__ = ["run", "Options", "RunOutcome", "PointOutcome", "SweepOutcome", "RunR
 OVERRIDES = ("paths", "seed", "backend")
 #: what a Dask scheduler's address looks like: [tcp|tls|ws|wss://]host:port
 SCHEDULER_ADDRESS = re.compile(r"^((tcp|tls|ws|wss)://)?(?P<host>[A-Za-z0-9._\-\[\]:]+):(?P<port>\d{1,5})$")
-#: compiling shorter than this is not worth a line of the report
-COMPILE_NOTE_SECONDS = 0.5
-#: why energy leaves a run without reaching the sensor, by energy/ dataset
-ENERGY_CAUSES = {"transmitted": "left through the bottom of the scene (a deeper scene, or a base, keeps it)",
-                 "truncated": "cut when paths reached run.max_order or the tracer's limit of interactions"}
 
 
 class RunRefused(ValueError):
@@ -90,121 +85,6 @@ class Options:
             return (f"dask at {self.scheduler}" if self.scheduler else
                     f"dask LocalCluster of {self.workers} worker(s)") + f" x {plan.threads} thread(s)"
         return f"{self.workers} worker(s) x {plan.threads} thread(s)"
-
-
-@dataclass
-class RunOutcome:
-    """A finished run: its plan, its tables (one per albedo), its results (``microsim.run.runner.Result``,
-    in the tables' order) and the seconds numba spent compiling before it traced."""
-
-    config: object
-    plan: object
-    tables: list[Path]
-    results: list
-    compiling: float
-    options: Options
-
-    @property
-    def paths_per_second(self) -> float:
-        """Paths traced (not resumed) per second of tracing; NaN where nothing was traced."""
-        first = self.results[0]
-        traced = self.plan.paths * self.plan.n_incidences * first.units_traced / len(self.plan.units)
-        return traced / first.wall_time if traced and first.wall_time > 0 else math.nan
-
-    def albedo_summary(self, result) -> str:
-        """The albedo of every incidence with its standard error, named by theta_i (and phi_i
-        where the incidences pair their azimuths)."""
-        plan = self.plan
-        azimuths = len(set(plan.phi_i.tolist())) > 1
-        return ", ".join(
-            f"{math.degrees(t):g}{f'/{math.degrees(p):g}' if azimuths else ''}deg "
-            f"{a.mean[RESULT_ALL_ORDERS]:.4f}+-{a.stderr[RESULT_ALL_ORDERS]:.4f}"
-            for t, p, a in zip(plan.theta_i, plan.phi_i, result.albedo))
-
-    def report(self) -> list[str]:
-        """The lines ``microsim run`` prints: the albedos, the time and rate, and the notes
-        (compiling, paths rounded up, energy lost beyond the albedo's error, the backend's
-        substitutions), then where the tables went."""
-        plan, results, first = self.plan, self.results, self.results[0]
-        summaries = [self.albedo_summary(result) for result in results]
-        rate = f"{self.paths_per_second:.3g} paths/s, " if first.units_traced else ""
-        timing = f"{first.wall_time:.1f} s, {rate}{self.options.where(plan)}, backend {plan.backend}"
-        if first.units_resumed:
-            timing += f"; {first.units_resumed} of {len(plan.units)} units resumed, {first.units_traced} traced"
-        if len(results) == 1:
-            lines = [f"albedo {summaries[0]} | {timing}"]
-        else:
-            lines = [f"material albedo {result.albedo_value:g}: albedo {summary} -> {path}"
-                     for path, result, summary in zip(self.tables, results, summaries)]
-            lines.append(f"{len(results)} albedos from one run of {plan.paths:,} paths an incidence: {timing}")
-        lines += self.notes()
-        lines.append(f"table written to {self.tables[0]}" if len(self.tables) == 1 else
-                     f"{len(self.tables)} tables written")
-        return lines
-
-    def notes(self) -> list[str]:
-        """The lines after a run's albedos (see :meth:`report`)."""
-        config, plan, notes = self.config, self.plan, []
-        if self.compiling >= COMPILE_NOTE_SECONDS:
-            notes.append(f"compiled the tracer in {self.compiling:.1f} s (not in the time above; once for this "
-                         "machine and these sources, then loaded from numba's cache)")
-        if plan.paths != config.run.paths:
-            notes.append(f"paths: {plan.paths:,} an incidence traced for the {config.run.paths:,} asked: "
-                         f"{plan.realizations} realizations of {plan.paths_per_realization:,} (run.paths rounded up "
-                         "to a multiple of run.realizations)")
-        for result in self.results:
-            notes.extend(_energy_notes(plan, result))
-        if plan.backend_note:
-            notes.append(f"note: {plan.backend_note}")
-        from microsim.geometry.periodic_tile import steepness_note
-
-        if (steep := steepness_note(plan.scene)) and self.results[0].units_traced:
-            notes.append(f"note: {steep}: {self.paths_per_second:.3g} paths/s here")
-        return notes
-
-
-@dataclass
-class PointOutcome:
-    """One point of a sweep: its table and its albedos; ``summary`` and ``wall_time`` of its run
-    ("" and 0 where ``resume`` kept its table). The tables hold the rest: a sweep keeps no
-    point's estimates in memory."""
-
-    point: object  # microsim.app.sweep.Point
-    table: Path
-    albedo: list[float]  # per incidence, all orders
-    summary: str = ""
-    wall_time: float = 0.0
-
-    @property
-    def kept(self) -> bool:
-        return not self.summary
-
-    def line(self) -> str:
-        """What ``microsim run`` prints as the point ends."""
-        if self.kept:
-            return f"{self.point.name}: kept (its table was finished)"
-        return f"{self.point.name}: albedo {self.summary} | {self.wall_time:.1f} s"
-
-
-@dataclass
-class SweepOutcome:
-    """A finished sweep: its directory, its points in order, and its index."""
-
-    directory: Path
-    points: list[PointOutcome] = field(default_factory=list)
-
-    @property
-    def index(self) -> Path:
-        """The sweep's index.csv."""
-        from microsim.app import sweep
-
-        return self.directory / sweep.INDEX
-
-    def report(self) -> list[str]:
-        """The line ``microsim run`` prints once the sweep is done."""
-        from microsim.app import sweep
-
-        return [f"{len(self.points)} tables and {sweep.INDEX} written to {self.directory}"]
 
 
 def run(config, out=None, *, progress: Progress | None = None, on_point=None, once_done: IgnoredOnceDone | None = None,
@@ -260,18 +140,19 @@ def run(config, out=None, *, progress: Progress | None = None, on_point=None, on
     out = Path(out) if out is not None else Path(f"{config_path.stem}.h5")
     if out.is_dir():
         raise RunRefused(f"--out: {out} is a directory; a config without [sweep] writes one table")
-    plan = _plan(validated, options)
+    run = _plan(validated, options)
     # a run of several albedos writes one table each, named from out with the albedo appended
-    outs = [out.with_name(f"{out.stem}_albedo{albedo_text(c)}{out.suffix}") for c in plan.albedos] or [out]
+    outs = [out.with_name(f"{out.stem}_albedo{albedo_text(c)}{out.suffix}") for c in run.plan.albedos] or [out]
     for path in outs:
         _refuse_input(path, config_path)
         _check_writable(path, options.force)
-    _check_memory(plan, options)
+    _check_memory(run, options)
+    store = _check_store(out, run, options)
     from microsim.geometry.periodic_tile import steepness_note
 
-    if note := steepness_note(plan.scene):
+    if note := steepness_note(run.plan.scene):
         progress.note(note)
-    return _trace(validated, plan, outs, out, options, progress, once_done=once_done)
+    return _trace(validated, run, outs, store, options, progress, once_done=once_done)
 
 
 def albedo_text(albedo: float) -> str:
@@ -282,23 +163,36 @@ def albedo_text(albedo: float) -> str:
 
 
 def _plan(config, options: Options, label: str = ""):
+    """The run of a validated config, planned once (:class:`microsim.run.runner.Run`)."""
     from microsim.run import runner
+    from microsim.run.plan import PlanError
 
     try:
-        return runner.Plan.from_config(config, options.threads, options.workers)
-    except runner.PlanError as err:
+        return runner.Run.of(config, options.threads, options.workers)
+    except PlanError as err:
         raise RunRefused(f"{label}{err}") from None
 
 
-def _check_memory(plan, options: Options, label: str = "") -> None:
+def _check_memory(run, options: Options, label: str = "") -> None:
     """The one memory check of a run, on this machine (a cluster's workers are elsewhere)."""
-    from microsim.run import runner
+    from microsim.run.plan import PlanError
 
     if options.scheduler is not None:
         return
     try:
-        runner.check_memory(plan, plan.build_sensor(), options.workers, spawned=options.executor == "dask")
-    except runner.PlanError as err:
+        run.check_memory(options.workers, spawned=options.executor == "dask")
+    except PlanError as err:
+        raise RunRefused(f"{label}{err}") from None
+
+
+def _check_store(table: Path, run, options: Options, label: str = ""):
+    """The unit store of the run writing ``table``, checked once, before anything is compiled or
+    traced (:meth:`microsim.run.unit_store.UnitStore.check`; :func:`_trace` takes it)."""
+    from microsim.run import unit_store
+
+    try:
+        return unit_store.UnitStore.check(unit_store.store_path(table), run.plan, options.resume, options.force)
+    except unit_store.StoreMismatch as err:
         raise RunRefused(f"{label}{err}") from None
 
 
@@ -321,42 +215,39 @@ def _run_sweep(points, out_dir: Path, options: Options, config_path: Path | None
                          "--force to overwrite its tables")
     if why := files.refusal(out_dir, directory=True):
         raise RunRefused(why)
-    plans, kept = [], []
+    runs, stores, kept = [], [], []
     for point in points:  # every refusal before anything is traced
         label = f"sweep point {point.name}: "
         path = out_dir / f"{point.name}.h5"
-        plan = _plan(point.config, options, label)
+        run = _plan(point.config, options, label)
         kept.append(_finished_table(path, point) if options.resume else None)
         if kept[-1] is None:
-            _check_memory(plan, options, label)
-            try:
-                unit_store.UnitStore.check(unit_store.store_path(path), plan, options.resume, options.force)
-            except unit_store.StoreMismatch as err:
-                raise RunRefused(f"{label}{err}") from None
-        plans.append(plan)
+            _check_memory(run, options, label)
+        stores.append(_check_store(path, run, options, label) if kept[-1] is None else None)
+        runs.append(run)
     out_dir.mkdir(parents=True, exist_ok=True)
     keys = list(points[0].values)
     rows = [{"point": p.name, **{k: p.values[k] for k in keys}, "table": f"{p.name}.h5", "status": "pending"}
             for p in points]
-    for row, plan, table in zip(rows, plans, kept):
+    for row, run, table in zip(rows, runs, kept):
         if table is not None:
-            sweep.index_albedos(row, plan.theta_i, table.arrays["albedo"])
+            sweep.index_albedos(row, run.plan.theta_i, table.arrays["albedo"])
     sweep.write_index(out_dir, rows)
     outcome = SweepOutcome(out_dir)
     last_traced = max((n for n, table in enumerate(kept) if table is None), default=None)
-    for n, (row, point, plan, table) in enumerate(zip(rows, points, plans, kept)):
+    for n, (row, point, run, store, table) in enumerate(zip(rows, points, runs, stores, kept)):
         path = out_dir / row["table"]
         if table is not None:
             unit_store.UnitStore(unit_store.store_path(path), {}).clear()  # outlived its table
             done = PointOutcome(point, path, list(table.arrays["albedo"]))
         else:
             _check_writable(path, options.force)
-            traced = _trace(point.config, plan, [path], path, options, progress,
+            traced = _trace(point.config, run, [path], store, options, progress,
                             label=f"sweep point {point.name}: ", once_done=once_done if n == last_traced else None)
             result = traced.results[0]
             done = PointOutcome(point, path, [a.mean[RESULT_ALL_ORDERS] for a in result.albedo],
                                 traced.albedo_summary(result), result.wall_time)
-            sweep.index_albedos(row, plan.theta_i, done.albedo)
+            sweep.index_albedos(row, run.plan.theta_i, done.albedo)
             sweep.write_index(out_dir, rows)
         outcome.points.append(done)
         if on_point is not None:
@@ -381,46 +272,43 @@ def _finished_table(path: Path, point):
     return table
 
 
-def _trace(config, plan, outs, store_table: Path, options: Options, progress: Progress, label: str = "",
+def _trace(config, run, outs, store, options: Options, progress: Progress, label: str = "",
            once_done=None) -> RunOutcome:
-    """Trace a planned and checked config (its memory, its tables' names) and write its tables
-    (one per albedo) to ``outs``; finished units are kept in the unit store named after
-    ``store_table`` until the tables are written. A failure or a signal says in its one line how many units were kept
-    for resume; a refusal keeps them all.
+    """Trace a planned and checked run (its memory, its tables' names, its unit ``store``) and
+    write its tables (one per albedo) to ``outs``; finished units are kept in the store until the
+    tables are written. A failure or a signal says in its one line how many units were kept for
+    resume; a refusal keeps them all.
 
-    The store is checked and the tracer compiled before the store is touched: a refusal costs no
-    unit, and a signal while numba compiles ends the run with nothing to clean up."""
+    The tracer is compiled before the store is taken: a refusal costs no unit, and a signal while
+    numba compiles ends the run with nothing to clean up."""
     from microsim import tables
-    from microsim.run import executors, runner, unit_store
+    from microsim.run import executors, unit_store
+    from microsim.run.plan import PlanError
     from microsim.tracer import embree
     from microsim.tracer.jit.compile_watch import CompileWatch
 
-    directory = unit_store.store_path(store_table)
-    try:
-        kept = unit_store.UnitStore.check(directory, plan, options.resume, options.force).saved_units()
-    except unit_store.StoreMismatch as err:
-        raise RunRefused(f"{label}{err}") from None
+    plan = run.plan
+    kept = store.saved_units()
     progress.start(plan, plan.tracer_class.COMPILE_SECONDS[plan.backend])
     try:
         with CompileWatch(progress.compiling) as watch:
             if options.scheduler is None and not (options.resume and len(kept) == len(plan.units)):
-                runner.compile_tracer(plan)
+                run.compile()
             try:
-                store = unit_store.UnitStore.open(directory, plan, options.resume, options.force)
+                store.take()
             except unit_store.StoreMismatch as err:
                 raise RunRefused(f"{label}{err}") from None
             with StopOnSignals(once_done) as guard:
                 try:
                     progress.tracing(watch)
-                    results = runner.trace(plan, options.workers, progress.unit, options.executor, options.scheduler,
-                                           store)
+                    results = run.trace(options.workers, progress.unit, options.executor, options.scheduler, store)
                     with guard.hold():
                         refused = _write_tables(outs, results, config, options, store, plan, label)
                     if refused:  # after the hold: a signal that came meanwhile is said first
                         raise refused[0]
                 except (embree.EmbreeUnavailable, executors.WorkerFailed, unit_store.UnitNotSaved) as err:
                     raise RunFailed(f"{label}{err}{_kept(store, plan)}") from None
-                except (executors.SchedulerUnreachable, runner.PlanError) as err:
+                except (executors.SchedulerUnreachable, PlanError) as err:
                     raise RunRefused(f"{label}{err}{_kept(store, plan)}") from None
                 except tables.TableExists as err:
                     raise RunRefused(f"--out: {err}") from None
@@ -468,24 +356,6 @@ def _kept(store, plan) -> str:
         store.clear()
         return ""
     return f"; {saved} of {len(plan.units)} units kept in {store.directory} (rerun with --resume to finish)"
-
-
-def _energy_notes(plan, result) -> list[str]:
-    """One line for each kind of lost energy (transmitted, truncated) that exceeds the albedo's
-    standard error at some incidence: there the albedo is short of the scene's by more than
-    its noise (the table's energy/ datasets hold every incidence)."""
-    from microsim.core.tally import ENERGY_NAMES
-
-    lines = []
-    for name, cause in ENERGY_CAUSES.items():
-        j = ENERGY_NAMES.index(name)
-        lost = [(t, energy.mean[j]) for t, energy, albedo in zip(plan.theta_i, result.energy, result.albedo)
-                if energy.mean[j] > albedo.stderr[RESULT_ALL_ORDERS]]
-        if lost:
-            where = ", ".join(f"{math.degrees(t):g}deg {value:.4f}" for t, value in lost)
-            albedo = f"material albedo {result.albedo_value:g}: " if result.albedo_value is not None else ""
-            lines.append(f"{albedo}energy {name}, beyond the albedo's standard error: {where} ({cause})")
-    return lines
 
 
 def _check_dask(scheduler) -> None:

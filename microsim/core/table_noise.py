@@ -16,7 +16,7 @@ the realizations, and the floor VARIANCE_FLOOR of the incidence's mean value (a 
 in a cell with signal would otherwise weigh without limit). Weighing each cell by its own
 estimated error instead runs high at few paths a cell, as a cell that fluctuated low also gets
 a small error (measurements: docs/developer/performance.md, section 'Fits and chi-square:
-weights, covariance and cells (issue 24)').
+weights, covariance and cells').
 
 Chi-square per cell of an exact model, (1/N) sum_C (m_C - f_C)^2 / v_C, is 1 in expectation.
 Its variance (:func:`chi2_bounds`) is [sum_C (1 - a_C)^2 (2 + kappa_C) + 4 sum_C a_C (1 - a_C)] /
@@ -43,16 +43,16 @@ deviation must lie within ``DROPPED_LIMIT`` standard errors of the largest varia
 direction can have, KEPT_ROUNDING times the rounding, plus a rounding floor of the values. The
 rounding of C (:func:`covariance_rounding`) is eps |f|^2 / R: C is the sums of the
 realizations' products less the product of their sums, over R (R - 1), and the cancellation
-leaves that much (the negative eigenvalues of 120 tables of a half space, 8 points, were
-within 0.3 of it). A fixed fraction of the largest eigenvalue (1e-9, as tests/test_points.py
+leaves that much (the negative eigenvalues of a half space's covariances lie within it:
+docs/validation/statistics.md, 'Points'). A fixed fraction of the largest eigenvalue (1e-9, as tests/test_points.py
 takes) does not do: the eigenvalues of a half space's points at order 1 fall geometrically
 (8 points: 1, 6e-2, 5e-3, 1e-4, 4e-6, 8e-8, 2e-10, then the rounding), and the noise
-directions under 1e-9, judged by their own estimated errors, rejected the exact model at 10 of
-120 incidences (16 realizations): along the smallest of a sample covariance's eigenvectors the
-mean deviates by more than the eigenvalue says (1.8 times its square root, in standard
-deviation, at 16 realizations; 1.25 at 32), which Hotelling's F distribution holds but a
-direction judged alone does not. With as many points as realizations or more (n >= R) there is no test:
-the covariance of R realizations has rank R - 1 at most, and a direction they did not sample
+directions under 1e-9, judged by their own estimated errors, reject an exact model far more
+often than their level: along the smallest of a sample covariance's eigenvectors the mean
+deviates by more than the eigenvalue says (docs/validation/statistics.md, 'Points'), which
+Hotelling's F distribution holds but a direction judged alone does not. With as many points as
+realizations or more (n >= R) there is no test: the covariance of R realizations has rank
+R - 1 at most, and a direction they did not sample
 would pass for an exact relation; the caller falls back to the bounds of :func:`normal_squares`.
 """
 

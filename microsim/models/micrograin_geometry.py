@@ -6,7 +6,7 @@ semi-axis 1 and lateral semi-axes 1/beta_x, 1/beta_y whose centres are a Poisson
 density rho on the base plane z = 0 (docs/conventions.md §5.3), so that the covered fraction is
 ``tau0 = 1 - exp(-rho pi / (beta_x beta_y))``. That density, lambda and the unit-space maps
 below are the relations of the Boolean model in :mod:`microsim.physics.boolean_model`, which the
-micrograin scene generator (a later issue) is to share.
+micrograin scene generator (:mod:`microsim.geometry.micrograins`) shares.
 
 Parametrisation. The paper takes spheres of radius r_s stretched laterally by 1/beta_x, 1/beta_y
 (Eq. 8) and then sets r_s = 1 (after Eq. 9): r_s is our vertical semi-axis, and beta is the

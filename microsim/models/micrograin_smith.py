@@ -34,7 +34,7 @@ Parameters are those of ``micrograin`` and mirror a micrograin scene's run confi
 (docs/conventions.md §4): ``material`` (lambert | conductor | mirror | interfaced_lambert) with
 ``albedo``, ``eta``, ``k`` as its ``[material]`` table takes them, ``base`` (absorber | lambert)
 with ``base_albedo``; the old names ``bulk``, ``bulk_albedo`` and the old grain description by
-``eta`` and ``k`` alone remain as aliases (see :mod:`microsim.models.micrograin`). As there, T
+``eta`` and ``k`` alone remain as aliases (see :mod:`microsim.models.micrograin_params`). As there, T
 omits the internal reflections of the scenes' interfaced_lambert material.
 """
 
@@ -43,8 +43,8 @@ from __future__ import annotations
 import numpy as np
 
 from microsim.models.base import Param, register
-from microsim.models.micrograin import MicrograinParams
 from microsim.models.micrograin_geometry import ndf, pore_visibility, smith_lambda
+from microsim.models.micrograin_params import MicrograinParams
 from microsim.physics.fresnel import fresnel_conductor_array, fresnel_dielectric_array
 
 #: The two Smith forms of the GAF (Lucas et al. 2023 use the separable one).

@@ -274,7 +274,7 @@ class TabulatedBRDF(BRDFModel):
 
     def cell_average_noise(self, rule, projected) -> CellNoise:
         """The averages of f over the cells of a fixed quadrature ``rule``
-        (:class:`microsim.analysis.compare.CellRule`, one incidence) and what the table's errors make of
+        (:class:`microsim.analysis.averages.CellRule`, one incidence) and what the table's errors make of
         them (:class:`CellNoise`; the albedo: sum(averages * ``projected``)). The table's values are
         taken as independent but for the common scale of its realizations
         (:func:`microsim.core.table_noise.realization_scale`, every incidence's the same

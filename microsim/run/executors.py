@@ -56,9 +56,7 @@ class SchedulerUnreachable(ValueError):
 def trace_units(plan, units, emit) -> None:
     """Trace ``units`` in order in this process, calling ``emit(unit, tally, scene_info)`` after
     each; the scene of a realization is built once for its consecutive units."""
-    sensor = plan.build_sensor()
-    estimators = plan.build_estimators(sensor)
-    generator = plan.generator
+    sensor, estimators, generator = plan.sensor, plan.estimators, plan.generator
     seed, max_order = plan.config.run.seed, plan.config.run.max_order
     current, tracer = None, None
     for r, i in units:
@@ -166,11 +164,10 @@ def _start_fork_server() -> None:
     Ctrl-C before that import waits and is discarded). A fork server that something else
     started first keeps its own disposition.
 
-    This process's SIGINT is never ignored. It was, for the milliseconds the server took to
-    start, and a Ctrl-C then was lost (3 runs in 8 under load, the run going on to its end;
-    ``tests/test_signals.py``): the kernel hands a signal to any thread that does not block it
-    (Embree's, numba's). The resource tracker is started first: its start unblocks SIGINT in
-    this thread as it ends, which the server would inherit."""
+    This process's SIGINT is never ignored, not even for the milliseconds the server takes to
+    start: a Ctrl-C then would be lost (``tests/test_signals.py``), as the kernel hands a signal
+    to any thread that does not block it (Embree's, numba's). The resource tracker is started
+    first: its start unblocks SIGINT in this thread as it ends, which the server would inherit."""
     from multiprocessing import forkserver, resource_tracker
 
     from distributed.utils import get_mp_context

@@ -1,7 +1,7 @@
 """Finished units of a run kept on disk, so that a run stopped by a crash, ``kill -9`` or a signal
 resumes where it stopped (``microsim run --resume``, docs/conventions.md §7).
 
-A run's units (realization x incidence, :attr:`microsim.run.runner.Plan.units`) are saved one file
+A run's units (realization x incidence, :attr:`microsim.run.plan.Plan.units`) are saved one file
 each, as they end, in the directory ``<table>.partial`` beside the table: the unit's tally
 (:class:`~microsim.core.tally.Tally`: each estimator's fields, arrays stored exactly in ``.npz``) and its
 realization's scene info (JSON). Each file is written under a temporary name, flushed to disk
@@ -73,7 +73,7 @@ def _digest(print_: dict) -> str:
 
 class UnitStore:
     """The units saved for one run. :meth:`check` says whether a run may use the directory;
-    :meth:`open` takes it (locked) for the run."""
+    :meth:`take` then takes it (locked) for the run; :meth:`open` is the two at once."""
 
     def __init__(self, directory: Path, print_: dict, records: dict | None = None):
         """``records``: the Record class of each estimator of the run, by name (microsim.tracer.estimators)."""
@@ -83,6 +83,7 @@ class UnitStore:
         self.records = records or {}
         self.fields = FIELDS + tuple(f"{name}.{field}" for name, record in self.records.items() for field in record._fields)
         self._lock = None
+        self.resume = self.force = False
 
     @classmethod
     def check(cls, directory: Path, plan, resume: bool, force: bool = False) -> "UnitStore":
@@ -92,50 +93,64 @@ class UnitStore:
         discarded unasked) unless ``force``; with it, its units must come from the same
         fingerprint (StoreMismatch naming what changed)."""
         store = cls(directory, fingerprint(plan), {name: estimators.get(name).Record for name in plan.estimator_names})
-        if not store.directory.exists() or (force and not resume):
-            return store
-        if not store.directory.is_dir():
+        store.resume, store.force = resume, force
+        store._verify()
+        return store
+
+    def _verify(self) -> None:
+        """StoreMismatch (one line) unless the run may take the directory as it is now (:meth:`check`)."""
+        directory, resume, force = self.directory, self.resume, self.force
+        if not directory.exists() or (force and not resume):
+            return
+        if not directory.is_dir():
             raise StoreMismatch(f"{directory} is not a directory of units; remove it, or pass --force")
         try:
-            theirs = json.loads((store.directory / MANIFEST).read_text())
+            theirs = json.loads((directory / MANIFEST).read_text())
         except (OSError, ValueError):
             theirs = None
-        units = len(list(store.directory.glob("r*_i*.npz")))
+        units = len(list(directory.glob("r*_i*.npz")))
         if units and not resume:
             raise StoreMismatch(f"{directory} holds {units} finished units of an interrupted run: pass --resume to "
                                 "continue it, or --force to discard them")
-        if units and (not isinstance(theirs, dict) or _digest(theirs) != store.key):
-            why = (_difference(theirs, store.fingerprint) if isinstance(theirs, dict)
+        if units and (not isinstance(theirs, dict) or _digest(theirs) != self.key):
+            why = (_difference(theirs, self.fingerprint) if isinstance(theirs, dict)
                    else f"its {MANIFEST} is missing or damaged")
             discard = "pass --force without --resume" if force else "pass --force"
             raise StoreMismatch(f"--resume: {directory} holds units of another run ({why}); rerun with the config "
                                 f"they came from, or {discard} to discard them")
-        return store
 
     @classmethod
     def open(cls, directory: Path, plan, resume: bool, force: bool = False) -> "UnitStore":
-        """:meth:`check`, then take the directory for this run: lock it (StoreMismatch if another
-        run holds it), drop unit files that do not read back whole, and start it afresh (with
-        this run's manifest) unless it holds this run's units."""
-        store = cls.check(directory, plan, resume, force)
-        if store.directory.exists() and not store.directory.is_dir():  # check let it go: --force
-            store.directory.unlink()
-        store.directory.mkdir(parents=True, exist_ok=True)
-        descriptor = os.open(store.directory, os.O_RDONLY)
+        """:meth:`check`, then :meth:`take`."""
+        return cls.check(directory, plan, resume, force).take()
+
+    def take(self) -> "UnitStore":
+        """Take the directory for the run this store was checked for: lock it (StoreMismatch if
+        another run holds it), drop unit files that do not read back whole, and start it afresh
+        (with this run's manifest) unless it holds this run's units."""
+        if self.directory.exists() and not self.directory.is_dir():  # check let it go: --force
+            self.directory.unlink()
+        self.directory.mkdir(parents=True, exist_ok=True)
+        descriptor = os.open(self.directory, os.O_RDONLY)
         try:
             fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
             os.close(descriptor)
-            raise StoreMismatch(f"{directory} is in use by another run writing the same table; wait for it to end, "
+            raise StoreMismatch(f"{self.directory} is in use by another run writing the same table; wait for it to end, "
                                 "or give this one another --out") from None
-        store._lock = descriptor
-        for stray in store.directory.glob(".*.tmp"):  # a write a kill cut short
+        self._lock = descriptor
+        try:  # what another run left meanwhile (it held the lock), seen now that this one holds it
+            self._verify()
+        except StoreMismatch:
+            self.release()
+            raise
+        for stray in self.directory.glob(".*.tmp"):  # a write a kill cut short
             stray.unlink()
-        if not (resume and store._drop_damaged()):
-            for path in store.directory.iterdir():
+        if not (self.resume and self._drop_damaged()):
+            for path in self.directory.iterdir():
                 shutil.rmtree(path) if path.is_dir() else path.unlink()
-            _write_durably(store.directory / MANIFEST, json.dumps(store.fingerprint, sort_keys=True).encode())
-        return store
+            _write_durably(self.directory / MANIFEST, json.dumps(self.fingerprint, sort_keys=True).encode())
+        return self
 
     def _unit_file(self, unit) -> Path:
         return self.directory / f"r{unit[0]}_i{unit[1]}.{self.key[:16]}.npz"

@@ -141,8 +141,8 @@ class Scene:
     Primitives are numbered across geometries: triangles first (0 .. F-1), then spheres
     (F .. F+K-1); ``prim_offset[geomID]`` turns Embree's (geomID, primID) into that number. A
     scene of triangles alone is built robust, as embreex builds its scenes, so that the two
-    backends find the same hits (see SCENE_FLAG_ROBUST); with spheres it is not (4-9 % faster,
-    the same sphere hits).
+    backends find the same hits (see SCENE_FLAG_ROBUST); with spheres it is not (faster, and the
+    same sphere hits: docs/developer/performance.md, 'The direct backend').
 
     ``sphere_scale`` = (sx, sy) other than (1, 1): the spheres are given in the frame where x is
     scaled by sx and y by sy, and stand for the ellipsoids that frame maps onto them. They go
@@ -237,7 +237,7 @@ class Scene:
         """Closest hits of rays (n, 3) float32 up to ``tfar``: (prim, t, Ng); prim -1 where none.
         ``out``, the (prim, t, Ng) of an earlier call on as many rays, is filled again instead of
         new arrays: a replay timed that way times Embree, not the first writes to fresh pages
-        (10 ns a ray on the micrograin scene of benchmarks/throughput.py)."""
+        (docs/developer/performance.md, 'The direct backend')."""
         origins = np.ascontiguousarray(origins, np.float32)
         directions = np.ascontiguousarray(directions, np.float32)
         tfar = np.ascontiguousarray(tfar, np.float32)

@@ -39,7 +39,7 @@ DEFAULT = ("exit_bins",)
 
 class Estimator:
     """What one estimator adds to a run (module doc); built for a run's ``sensor`` and ``plan``
-    (:class:`microsim.run.runner.Plan`; None for a tracer used without a run)."""
+    (:class:`microsim.run.plan.Plan`; None for a tracer used without a run)."""
 
     name: ClassVar[str]
     #: the NamedTuple class of its tally fields (the kernels' hooks are registered on it)
@@ -49,7 +49,7 @@ class Estimator:
     #: the attributes of the table's root it writes (microsim.core.table_layout.Attribute)
     ATTRIBUTES: ClassVar[tuple] = ()
     #: the names of :meth:`reduce` whose estimates share their paths along the last axis: the
-    #: reducer keeps their covariance too (microsim.run.runner.Estimate.covariance)
+    #: reducer keeps their covariance too (microsim.run.reduction.Estimate.covariance)
     COVARIANT: ClassVar[tuple] = ()
 
     def __init__(self, sensor, plan=None):
@@ -89,7 +89,7 @@ class Estimator:
 
     def write(self, put, estimates: dict) -> None:
         """Write the datasets: ``put(name, array)`` stores one; ``estimates`` maps each name of
-        :meth:`reduce` to its per-incidence :class:`microsim.run.runner.Estimate` list."""
+        :meth:`reduce` to its per-incidence :class:`microsim.run.reduction.Estimate` list."""
         raise NotImplementedError
 
     def attributes(self) -> dict:

@@ -8,7 +8,9 @@ paths of one unit of work, on the random stream ``key``, tallied by the run's es
 every albedo of ``albedo_scale``, the sensor turned toward the incidence of azimuth ``phi_i``;
 the tally must not depend on ``threads``) and a classmethod
 ``compile(sensor, estimators, albedos, scene, backend, threads)`` that compiles the kernels of
-that run, and no other, before worker processes fork. Every integrator is a transport driven by
+that run, and no other, before worker processes fork, and a static method
+``working_bytes(backend, threads, paths, tally_bytes, points)``, the bytes it works in while it
+traces a unit (the run's memory estimate adds it to the scene's). Every integrator is a transport driven by
 one walk (:mod:`.walk`: the handling of each event, the path loop), with the queries of
 next-event estimation registered on its world (:data:`.walk.EVALUATE`, :data:`.walk.VISIBILITY`,
 and :data:`.walk.SEE` where visibility is answered later); the per-path records and the

@@ -92,8 +92,8 @@ def trace_chunk(begin, end, row, beam, world, sensor, work, tally):
     """Paths begin .. end-1, two at a time in rows ``row`` and ``row + 1``: both queries, then both
     events, so that the processor overlaps the two paths' event arithmetic (independent chains of
     divisions, square roots and random numbers); a slot whose path ends takes the next path.
-    One body serves both slots and the last one alone: numba inlines the event kernels twice
-    (with a third copy for the last slot, the kernel took 56 s to compile)."""
+    One body serves both slots and the last one alone, so numba inlines the event kernels twice,
+    not three times (compile times: docs/developer/performance.md, 'The direct backend')."""
     scene, handle = world
     a, b = row, row + 1
     busy_a, busy_b, number = False, False, begin

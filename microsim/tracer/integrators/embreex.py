@@ -48,6 +48,15 @@ from microsim.tracer.integrators.walk import EVALUATE, SEE
 BATCH_PATHS = 1 << 20
 #: bytes of a queued shadow ray (its segment, payload and wraps) and of embreex's output for it
 SHADOW_BYTES = 60
+#: bytes a path row takes while its batch is traced (row, ray, outputs)
+PATH_ROW_BYTES = 80
+
+
+def batch_bytes(paths: int, points: int) -> int:
+    """Bytes the embreex backend works in for a unit of ``paths`` paths with ``points`` next-event
+    points: a batch of path rows and its shadow queue."""
+    rows = min(paths, BATCH_PATHS // max(points, 1))
+    return rows * (PATH_ROW_BYTES + points * SHADOW_BYTES)
 
 
 class ShadowQueue(NamedTuple):

@@ -25,7 +25,7 @@ from microsim.physics.sampling import from_local
 from microsim.tracer.estimators import DEFAULT, build
 from microsim.tracer.integrators.events import begin_path
 from microsim.tracer.integrators.records import Beam
-from microsim.tracer.integrators.scheduler import trace_in_waves, wave_rows, workspace
+from microsim.tracer.integrators.scheduler import trace_in_waves, wave_bytes, wave_rows, workspace
 from microsim.tracer.integrators.walk import EVALUATE, EXIT, INTERACTION, VISIBILITY, trace_chunks
 
 
@@ -44,6 +44,11 @@ class MediumTracer:
     #: seconds numba takes to compile the kernels of each backend, cold (AMD EPYC Zen 4, 2026-12-02;
     #: the progress line quotes it while it compiles)
     COMPILE_SECONDS = {"direct": 3, "embreex": 3}
+
+    @staticmethod
+    def working_bytes(backend: str, threads: int, paths: int, tally_bytes: int, points: int) -> int:
+        """Bytes it works in while it traces a unit of ``paths`` paths (for the memory estimate)."""
+        return wave_bytes(threads, tally_bytes)
 
     def __init__(self, scene, sensor, backend: str = "direct", threads: int = 1, estimators=None):
         self.scene, self.sensor, self.threads = scene, sensor, threads

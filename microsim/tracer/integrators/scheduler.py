@@ -33,6 +33,12 @@ CHUNK_PATHS = 8192
 #: chunks of a wave per thread, each thread tracing a contiguous share in one call; the wave's
 #: chunk tallies are then summed in chunk order
 WAVE_CHUNKS_PER_THREAD = 4
+
+
+def wave_bytes(threads: int, tally_bytes: int) -> int:
+    """Bytes a tracer of chunks in waves works in on ``threads`` threads: a wave's chunk tallies
+    (``tally_bytes`` each) and their path rows."""
+    return WAVE_CHUNKS_PER_THREAD * threads * (tally_bytes + 1024)
 #: paths of a chunk traced side by side (:func:`trace_chunk`)
 SLOTS = 2
 

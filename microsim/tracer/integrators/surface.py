@@ -15,6 +15,7 @@ from microsim.core.tally import SINGLE_ALBEDO
 from microsim.tracer.estimators import DEFAULT, build
 from microsim.tracer.integrators import direct, embreex, grid
 from microsim.tracer.integrators.records import Beam
+from microsim.tracer.integrators.scheduler import wave_bytes
 from microsim.tracer.materials import Absorber
 from microsim.tracer.scene import Scene, SceneBuilder
 
@@ -38,6 +39,14 @@ class SurfaceTracer:
     #: seconds numba takes to compile the kernels of each backend, cold (AMD EPYC Zen 4, 2026-12-02;
     #: the progress line quotes it while it compiles)
     COMPILE_SECONDS = {"direct": 20, "embreex": 7}
+
+    @staticmethod
+    def working_bytes(backend: str, threads: int, paths: int, tally_bytes: int, points: int) -> int:
+        """Bytes it works in while it traces a unit of ``paths`` paths (for the memory estimate):
+        the embreex backend's batch of path rows and shadow queue, or a wave's chunk tallies."""
+        if backend == "embreex":
+            return embreex.batch_bytes(paths, points)
+        return wave_bytes(threads, tally_bytes)
 
     def __init__(self, scene: Scene, sensor, backend: str = "direct", threads: int = 1, estimators=None):
         self.scene, self.sensor = scene, sensor

@@ -18,8 +18,8 @@ Reference counting: the backends' kernels allocate nothing and are compiled with
 reference-counting runtime (``_nrt=False``), as are the kernels they call without inlining
 (``scatter``, ``surface_point``, ``move_path``; a callee compiled with it would bring its increfs
 along). With it, numba's IR inlining of the event kernels increfs and decrefs every array of
-each bundle passed to them (14 atomic pairs per interaction), which doubled the wavefront
-kernel's time. A kernel of the tracer therefore never allocates.
+each bundle passed to them (14 atomic pairs per interaction), about as long as the kernel's own
+work. A kernel of the tracer therefore never allocates.
 
 Self-intersection: a scattered ray starts from the hit projected onto the analytic surface (for
 meshed spheres and ellipsoids: onto the mesh's circumscribed surface, outside the own convex
@@ -27,9 +27,8 @@ mesh; native spheres are exact) and offset along the analytic normal by the :fun
 max(OFFSET_SIZE x shape size, OFFSET_SPACINGS float32 spacings of the coordinates). Embree may
 still report the own sphere at a tiny distance for a grazing ray, from behind (its exit); a ray
 that meets a surface from behind is inside a solid by round-off (also at the seams of
-overlapping shapes): it passes through and the event is counted. At the clearance no outgoing
-ray of a test on a native sphere met its own sphere; at a fixed 1e-6 offset about 1 % did, every
-one from behind.
+overlapping shapes): it passes through and the event is counted. At the clearance a ray leaving
+a native sphere does not meet that sphere again, where a fixed offset of 1e-6 does not suffice.
 
 (measurements: docs/developer/performance.md, section 'Surface transport: reference counting and
 self-intersection')

@@ -44,7 +44,7 @@ from microsim.tracer import embree
 from microsim.tracer.estimators import DEFAULT, build
 from microsim.tracer.integrators.events import begin_path
 from microsim.tracer.integrators.records import Beam
-from microsim.tracer.integrators.scheduler import trace_in_waves, wave_rows, workspace
+from microsim.tracer.integrators.scheduler import trace_in_waves, wave_bytes, wave_rows, workspace
 from microsim.tracer.integrators.walk import EVALUATE, EXIT, INTERACTION, STOP, VISIBILITY, trace_chunks
 from microsim.tracer.materials import evaluate, scatter
 
@@ -98,6 +98,11 @@ class VCavityTracer:
     #: seconds numba takes to compile the kernels of each backend, cold (AMD EPYC Zen 4, 2026-12-02;
     #: the progress line quotes it while it compiles)
     COMPILE_SECONDS = {"direct": 5, "embreex": 5}
+
+    @staticmethod
+    def working_bytes(backend: str, threads: int, paths: int, tally_bytes: int, points: int) -> int:
+        """Bytes it works in while it traces a unit of ``paths`` paths (for the memory estimate)."""
+        return wave_bytes(threads, tally_bytes)
 
     def __init__(self, scene, sensor, backend: str = "direct", threads: int = 1, estimators=None, log_rays: int = 0):
         if log_rays and (threads != 1 or scene.intersector != "embree"):

@@ -46,11 +46,11 @@ embreex call (why each: their module docstrings).
 The transport's functions are arguments, and every function here is inlined by numba: an
 integrator's kernel names its own functions (module globals), so numba inlines them where
 they are called, and the walk runs the machine code of a loop written for that integrator.
-Dispatch by the world's type (:mod:`microsim.tracer.jit.dispatch`) was rejected here: it compiles each
-function apart, and the calls cost the V-cavities 30 % of their speed.
+The walk does not dispatch by the world's type (:mod:`microsim.tracer.jit.dispatch`): that
+compiles each function apart, and its calls are not inlined.
 
-(measurements against the loops this walk replaced, and of the rejected designs:
-docs/developer/performance.md, section 'One walk, estimators and dispatch (issue 25), 2026-12-02')
+(measurements of this walk and of the designs tried: docs/developer/performance.md, section
+'One walk, estimators and dispatch')
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
 """The time numba spends compiling in this process, told as it starts and ends.
 
 A first run on a new machine (or after any edit of microsim's sources, :mod:`kernel_cache`)
-compiles its tracer's kernel before it traces: 3 to 20 s, during which no unit ends. The command
+compiles its tracer's kernel before it traces (for seconds: each tracer's ``COMPILE_SECONDS``),
+during which no unit ends. The command
 line says so while it happens, and keeps that time out of the time left and out of paths/s. A
 kernel loaded from numba's disk cache is not a compile and is not counted.
 """

@@ -3,16 +3,16 @@
 To inline a callee, numba deep-copies its IR block by block, each block with a fresh memo: every
 block's copy takes a copy of the function's whole scope (all its variables), and the copied
 blocks then hold as many scopes, which numba compares with each other. The cost is blocks x
-variables per inlining, and the tracers inline kernels that inlined others: compiling the
-direct backend's kernel for native spheres spent most of its time in ``copy.deepcopy``.
+variables per inlining, and the tracers inline kernels that inline others: without this module,
+compiling the direct backend's kernel for native spheres spends most of its time in
+``copy.deepcopy``.
 
 :func:`install` wraps ``InlineWorker.inline_ir`` so that, within one inlining, the blocks of one
 scope are copied with one memo: one copy of the scope, shared by the copied blocks as the
-originals share theirs, and every other object copied as before. The machine code is the same
-(the assembly of the three tracers' kernels, identical with and without it); only the compile
-is shorter, about a third of the time for that kernel (measurements: docs/developer/performance.md,
-sections 'Inlining without quadratic IR copies (issue 30), 2026-12-02' and 'Compile times,
-2026-12-02').
+originals share theirs, and every other object copied as numba copies it. The machine code is
+the same (the assembly of the three tracers' kernels, identical with and without it); only the
+compile is shorter (measurements: docs/developer/performance.md, sections 'Inlining without
+quadratic IR copies' and 'Compile times').
 """
 
 from __future__ import annotations

@@ -29,7 +29,7 @@ TRACER_FOLDERS = ("tracer", "physics")
 #: the contract's modules whose constants the tracer's kernels index with (tally rows, orders)
 CONTRACT_CONSTANTS = ("core/tally.py", "core/orders.py")
 #: what the models' kernels, the testing helpers' and the checkout's add: the models
-MODEL_SOURCES = ("models", "testing.py")
+MODEL_SOURCES = ("models", "testing")
 #: files whose kernels get the stamp: the package, and the checkout's callers of it
 STAMPED = (PACKAGE, PACKAGE.parent / "benchmarks", PACKAGE.parent / "tests")
 #: files outside the carried sources that hold kernels compiled into microsim's (an estimator's

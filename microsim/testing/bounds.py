@@ -1,4 +1,11 @@
-"""Statistical bounds shared by the physics tests."""
+"""Statistical bounds on the mean z^2 of a table's cells, shared by the physics tests.
+
+Contract: with R realizations a cell's z = (estimate - truth) / stderr is Student-t with
+R - 1 degrees of freedom; over n cells the mean z^2 lies within :func:`chi2_lower_bound` and
+:func:`chi2_bound` (its expectation -+ 5 standard deviations of the mean) unless the estimates
+or their standard errors are wrong. Cells that share a realization's geometry are correlated:
+the bounds hold for tiles or realizations large enough (docs/developer/testing.md).
+"""
 
 import math
 

@@ -1,5 +1,8 @@
-"""What microsim's tests and benchmarks check the engine with (as numpy.testing, and Mitsuba 3's
-``chi2.py`` for BSDFs).
+"""The chi-square test of a material's sampling (after Mitsuba 3's ``chi2.py`` for BSDFs).
+
+Contract: :func:`material_check` returns the p-values of three statistics; a correct material
+gives p-values uniform on [0, 1], so a test requires each above a small threshold (1e-4 in
+tests/test_materials.py), and a broken sampler gives p-values near 0.
 
 :func:`material_check`: a material's sampling against its ``evaluate`` and ``pdf``
 (:mod:`microsim.tracer.materials`), on the hemisphere of a tilted shading normal. Directions are drawn

@@ -1,14 +1,19 @@
-"""Property-based fuzzing of ``microsim run`` (issue 13, deliverable 5), shared by the suite
-(tests/test_fuzz_cli.py, reduced size) and benchmarks/fuzz_cli.py (full size).
+"""Property-based fuzzing of ``microsim run``, shared by the suite (tests/test_fuzz_cli.py,
+reduced size) and benchmarks/fuzz_cli.py (full size).
 
-A case is a config and a command line drawn by hypothesis: a cheap valid config of every scene
-kind, then up to four mutations (a key of any section, known or not, set to an edge value --
-zero, negative, NaN, infinity, huge, a wrong type -- or deleted), optionally a ``[sweep]`` with
-good or bad keys, optionally a file that is not TOML at all; and flags with good and bad values.
-Counts (paths, realizations, cells, tile, depth) are drawn either cheap and valid or invalid,
-so that a valid case traces in a fraction of a second. :func:`check` runs it in-process and
-proves the contract: exit 0 with a loadable table (or a sweep's tables and index) and nothing
+Contract: :func:`check` runs one case drawn by :func:`cases` in-process and asserts what the
+command line promises: exit 0 with a loadable table (or a sweep's tables and index) and nothing
 left behind, or exit 2 with one line on stderr and nothing written; never a traceback.
+
+A case is a config and a command line drawn by hypothesis: the example config of a scene kind
+(every kind of ``microsim.geometry.SCENES``, its ``EXAMPLE`` through
+:func:`microsim.testing.scenes.example`, so that a new kind is fuzzed with no change here) at
+the cheap counts of ``COMMON``, then up to four mutations (a key of any section, known or not,
+set to an edge value -- zero, negative, NaN, infinity, huge, a wrong type -- or deleted),
+optionally a ``[sweep]`` with good or bad keys, optionally a file that is not TOML at all; and
+flags with good and bad values. Counts (paths, realizations, cells, tile, depth, statistics
+rays) are drawn either cheap and valid or invalid, so that a valid case traces in a fraction of
+a second.
 """
 
 from __future__ import annotations
@@ -24,18 +29,10 @@ from hypothesis import strategies as st
 from microsim import tables
 from microsim.app.sweep import INDEX
 from microsim.cli import main
+from microsim.geometry import SCENES
+from microsim.testing.scenes import example
 
-BASES = {
-    "plane": {"scene": {"kind": "plane"}, "material": {"kind": "lambert", "albedo": 0.5}},
-    "poisson_spheres": {"scene": {"kind": "poisson_spheres", "volume_fraction": 0.3, "tile": 8.0, "depth": 4.0},
-                        "material": {"kind": "lambert", "albedo": 0.8}},
-    "micrograins": {"scene": {"kind": "micrograins", "tau0": 0.5, "beta": 1.0, "tile": 7.0},
-                    "material": {"kind": "conductor", "eta": 1.0152, "k": 6.6273}},
-    "vcavities": {"scene": {"kind": "vcavities", "distribution": "beckmann", "roughness": 0.5},
-                  "material": {"kind": "lambert", "albedo": 0.5}},
-    "halfspace_medium": {"scene": {"kind": "halfspace_medium", "phase": "isotropic"},
-                         "material": {"kind": "lambert", "albedo": 0.5}},
-}
+#: the sections that replace an example's: counts cheap enough for a case to trace in a fraction of a second
 COMMON = {"illumination": {"theta_i_deg": [0.0, 60.0]}, "sensor": {"cells": 24},
           "run": {"paths": 120, "realizations": 2, "seed": 1}}
 
@@ -63,10 +60,11 @@ BOUNDED = {
     ("scene", "depth"): cheap_or_bad(st.floats(0.5, 6.0)),
     ("scene", "subdivisions"): cheap_or_bad(st.integers(0, 2)),
     ("scene", "mesh_error"): cheap_or_bad(st.floats(0.05, 0.5)),
+    ("scene", "statistics_rays"): cheap_or_bad(st.integers(16, 64)),
 }
 #: other keys mutated with any value: the schema's and some it does not know
-KEYS = [("scene", k) for k in ("kind", "volume_fraction", "tau0", "beta", "beta_x", "beta_y", "roughness",
-                                "roughness_x", "roughness_y", "distribution", "phase", "intersector", "bogus")] + \
+KEYS = [("scene", k) for k in sorted({key for module in SCENES.values() for key in module.Config.model_fields}
+                                     - {key for section, key in BOUNDED if section == "scene"}) + ["bogus"]] + \
        [("material", k) for k in ("kind", "albedo", "eta", "k", "bogus")] + \
        [("base", k) for k in ("kind", "albedo")] + \
        [("illumination", k) for k in ("theta_i_deg", "phi_i_deg", "bogus")] + \
@@ -125,8 +123,8 @@ def cases(draw):
     """(config file bytes, extra flags, whether it is a sweep, what was left in the unit store)."""
     if draw(st.integers(0, 19)) == 0:
         return draw(garbage), [], False, None
-    kind = draw(st.sampled_from(sorted(BASES)))
-    data = json.loads(json.dumps({**BASES[kind], **COMMON}))  # a deep copy
+    kind = draw(st.sampled_from(sorted(SCENES)))
+    data = {**example(kind), **json.loads(json.dumps(COMMON))}  # copies of their own
     for (section, key), value in draw(st.lists(mutation, max_size=4)):
         node = data if section is None else data.setdefault(section, {})
         if not isinstance(node, dict):
