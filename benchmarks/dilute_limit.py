@@ -218,7 +218,7 @@ def main():
         ax.plot(r_over_l, [r[2][j, 1] for r in rows], "-", color=line.get_color(), lw=1)
     ax.plot([], [], "k-", lw=1, label="finite-size model (lines)")
     ax.plot([radius_over_free_path(0.02)] * len(theta), brute, "k*", ms=10, label="brute force, exact spheres")
-    ax.axhline(0.03, color="r", lw=0.8, ls="--", label="3 % (acceptance d)")
+    ax.axhline(0.03, color="r", lw=0.8, ls="--", label="3 %")
     ax.set_xlabel("r / l = -3/4 ln(1 - phi)")
     ax.set_ylabel("median (order 1 / point scatterers) - 1")
     ax.set_title("single scattering: Boolean spheres vs radiative transfer")

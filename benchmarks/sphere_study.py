@@ -61,7 +61,7 @@ RETRO_RINGS = 24
 OUTER_RINGS = 4
 RETRO_EXCLUSION_DEG = 10.0
 LAW_MAX_PHI = 0.1
-#: acceptance c: the dilute case, traced again with more paths (albedos up to 0.9: shorter paths)
+#: the dilute check: the dilute case, traced again with more paths (albedos up to 0.9: shorter paths)
 DILUTE_PHI, DILUTE_ALBEDOS = 0.005, [0.3, 0.6, 0.9]
 ORDER_NAMES = ["1", "2", "3", "4+", "all"]
 TABLES = OUT / "sphere_study"
@@ -262,7 +262,7 @@ def main():
     parser.add_argument("--medium-paths", type=int, default=4_000_000)
     parser.add_argument("--seed", type=int, default=41)
     parser.add_argument("--dilute-paths", type=int, default=4_000_000,
-                        help="explicit spheres at phi = DILUTE_PHI for acceptance c (medium: 4x); 0 skips it")
+                        help="explicit spheres at phi = DILUTE_PHI for the dilute check (medium: 4x); 0 skips it")
     parser.add_argument("--rerun", action="store_true")
     parser.add_argument("--from-json", action="store_true",
                         help="redo the laws and the charts from benchmarks/out/sphere_study.json, tracing nothing")
@@ -303,12 +303,12 @@ def main():
 
 
 def dilute_check(args):
-    """Acceptance c: at phi = DILUTE_PHI, every order of the explicit table against the medium,
+    """The dilute check: at phi = DILUTE_PHI, every order of the explicit table against the medium,
     on the COARSE_CELLS sensor, from runs precise enough that noise does not hide 2 %."""
     ensure_tables("spheres_dilute", DILUTE_PHI, args.dilute_paths, args.seed + 2, args.rerun, DILUTE_ALBEDOS)
     ensure_tables("medium_dilute", DILUTE_PHI, 4 * args.dilute_paths, args.seed + 3, args.rerun, DILUTE_ALBEDOS)
     out = {"volume_fraction": DILUTE_PHI, "paths": args.dilute_paths, "medium_paths": 4 * args.dilute_paths}
-    print(f"Acceptance c: phi = {DILUTE_PHI}, {args.dilute_paths:,} paths, {COARSE_CELLS} cells: median |rel| "
+    print(f"Dilute check: phi = {DILUTE_PHI}, {args.dilute_paths:,} paths, {COARSE_CELLS} cells: median |rel| "
           "(noise alone) / chi^2 per cell / albedo ratio, theta_i " + " ".join(f"{t:g}" for t in THETA_I_DEG))
     for c in DILUTE_ALBEDOS:
         vs = explicit_vs_medium(tables.load(table_path("spheres_dilute", DILUTE_PHI, c)),
