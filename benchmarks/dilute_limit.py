@@ -33,7 +33,8 @@ from microsim import models
 from microsim.models.radiative_transfer import single_scattering
 from microsim.physics.boolean_model import free_path, number_density, radius_over_free_path
 from microsim.testing import trace
-from microsim.tracer.sensor import Sensor, cell_index
+from microsim.tracer.sensor import Sensor
+from microsim.tracer.sensor_kernels import cell_index
 
 OUT = Path(__file__).resolve().parent / "out"
 ALBEDO = 0.9

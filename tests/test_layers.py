@@ -246,3 +246,28 @@ def long_signatures() -> list[str]:
 
 def test_no_function_takes_more_than_8_arguments():
     assert long_signatures() == []
+
+
+#: reads a table as a user would, then lists what that imported: numba, and microsim's modules
+READ_A_TABLE = """
+import sys
+from microsim import tables
+table = tables.load(sys.argv[1])
+table.sensor.projected_solid_angle(), table.brdf, table.albedo, table.direction
+print("numba" in sys.modules, " ".join(sorted(m for m in sys.modules if m.startswith("microsim"))))
+"""
+
+
+def test_reading_a_table_imports_no_kernel_module():
+    """``microsim.tables.load`` and what a table holds (its sensor, its BRDF and albedo) import no
+    numba, so no kernel module: the estimators' declarations are read, not their hooks."""
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", READ_A_TABLE, str(ROOT / "tests" / "data" / "table_format_1_0.h5")],
+                          capture_output=True, text=True, cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    numba, modules = done.stdout.split(" ", 1)
+    assert numba == "False", modules
+    assert not any(m.endswith(("_hooks", "sensor_kernels")) or ".integrators" in m or ".jit.dispatch" in m
+                   for m in modules.split())

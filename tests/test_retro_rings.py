@@ -13,7 +13,8 @@ from microsim.models.radiative_transfer import single_scattering
 from microsim.testing import trace
 from microsim.testing.bounds import chi2_bound, chi2_lower_bound
 from microsim.testing.refusals import assert_run_refused, small_config
-from microsim.tracer.sensor import Sensor, retro_ring
+from microsim.tracer.sensor import Sensor
+from microsim.tracer.sensor_kernels import retro_ring
 
 REALIZATIONS = 32
 

@@ -7,7 +7,9 @@ An estimator is one module with one :class:`Estimator` subclass and one line in
   can cache the kernels that take it) whose fields are float64 arrays of the shapes
   :meth:`Estimator.shapes` gives; the tracer allocates them per chunk of paths, after a row
   axis and an albedo axis in a run of several albedos (:class:`microsim.core.tally.Tally`);
-- its hooks, numba implementations registered on its ``Record`` class in :mod:`.hooks`:
+- its hooks, numba implementations registered on its ``Record`` class in :mod:`.hooks`, in the
+  module its ``HOOKS`` names (``exit_bins_hooks``, ``points_hooks``: the declaration imports no
+  numba, so that reading a table imports no kernel):
   ``on_exit`` (a path leaves the surface) and ``on_interaction`` (a path is about to interact);
   the walk of every integrator calls them (:mod:`microsim.tracer.integrators.walk`);
 - its reduction of a unit's fields to per-realization estimates, named (:meth:`Estimator.reduce`);
@@ -44,6 +46,10 @@ class Estimator:
     name: ClassVar[str]
     #: the NamedTuple class of its tally fields (the kernels' hooks are registered on it)
     Record: ClassVar[type]
+    #: the module that registers its kernel hooks, imported when the estimator is built for a
+    #: tracer (None: its own module registers them); apart, so that reading a table, which reads
+    #: the estimators' declarations, imports no kernel
+    HOOKS: ClassVar[str | None] = None
     #: the datasets it writes (microsim.core.table_layout.Dataset): the table's declared layout
     DATASETS: ClassVar[tuple] = ()
     #: the attributes of the table's root it writes (microsim.core.table_layout.Attribute)
@@ -119,5 +125,9 @@ def names_for(config) -> tuple[str, ...]:
 
 
 def build(names, sensor, plan=None) -> tuple[Estimator, ...]:
-    """The estimators ``names`` (of a run: ``plan``) on ``sensor``."""
-    return tuple(get(name)(sensor, plan) for name in names)
+    """The estimators ``names`` (of a run: ``plan``) on ``sensor``, their kernel hooks registered."""
+    classes = [get(name) for name in names]
+    for cls in classes:
+        if cls.HOOKS is not None:
+            importlib.import_module(cls.HOOKS)
+    return tuple(cls(sensor, plan) for cls in classes)

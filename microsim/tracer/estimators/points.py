@@ -35,9 +35,6 @@ import numpy as np
 from microsim.core.orders import ORDERS
 from microsim.core.table_layout import Attribute, Dataset
 from microsim.tracer.estimators import Estimator
-from microsim.tracer.estimators.exit_bins import add_exit
-from microsim.tracer.estimators.hooks import ON_INTERACTION, ON_SEEN
-from microsim.tracer.integrators import walk
 
 
 class PointsTally(NamedTuple):
@@ -52,6 +49,7 @@ class Points(Estimator):
 
     name = "points"
     Record = PointsTally
+    HOOKS = "microsim.tracer.estimators.points_hooks"
     DATASETS = tuple(
         dataset
         for name, axes, doc in (
@@ -147,30 +145,3 @@ class Points(Estimator):
                                                                        ("base", config.base))
                  if m is not None and m.delta_lobes]
         return {"points_delta_lobes": "; ".join(parts)}
-
-
-@ON_INTERACTION.register(PointsTally)
-def on_interaction(record, tally, work, i, world, site, sensor):
-    """The event of path i sends a shadow ray towards every point: w e V into the row of the
-    order its interaction makes (module doc)."""
-    d, state = site
-    paths = work.paths
-    w, order = paths.weight[i], paths.order[i] + 1
-    row = min(order, ORDERS) - 1
-    wi = (-d[0], -d[1], -d[2])
-    weight = record.weight[tally.row]
-    points = sensor.points
-    for k in range(len(points)):
-        wo = (points[k, 0], points[k, 1], points[k, 2])
-        value = walk.evaluate(world, state, wi, wo)
-        if value > 0.0:
-            seen = walk.see(world, work, i, state, wo, (w * value, k, order))
-            if seen > 0.0:
-                add_exit(weight, tally.albedo_scale, (row, k), w * value * seen, order)
-
-
-@ON_SEEN.register(PointsTally)
-def on_seen(record, tally, payload):
-    """A queued shadow ray towards point k reached the sky: its w e into the row of its order."""
-    amount, k, order = payload
-    add_exit(record.weight[tally.row], tally.albedo_scale, (min(order, ORDERS) - 1, k), amount, order)

@@ -61,7 +61,7 @@ def batch_bytes(paths: int, points: int) -> int:
 
 class ShadowQueue(NamedTuple):
     """Shadow rays waiting for Embree: their segments (as :class:`~.records.Rays`), their payloads
-    (amount, point, order: :func:`microsim.tracer.estimators.points.on_interaction`), the tile sides each
+    (amount, point, order: :func:`microsim.tracer.estimators.points_hooks.on_interaction`), the tile sides each
     has wrapped at, and how many are queued (``count[0]``). A pass queues at most a ray a point
     for each path of the batch (one interaction a path), so rows x points never overflow."""
 
