@@ -85,3 +85,26 @@ def test_a_toy_estimator_is_one_module_and_one_registration(tmp_path):
 
 if __name__ == "__main__":
     main(sys.argv[1])
+
+
+#: unpickles a run's plan as a Dask worker does, then lists the records whose exit hook is registered
+UNPICKLED_PLAN = """
+import pickle, sys
+plan = pickle.loads(sys.stdin.buffer.read())
+from microsim.tracer.estimators.hooks import ON_EXIT, ON_INTERACTION
+print(sorted(c.__name__ for c in (*ON_EXIT.implementations, *ON_INTERACTION.implementations)))
+"""
+
+
+def test_a_plan_unpickled_in_another_process_has_its_estimators_hooks_registered():
+    """A Dask worker unpickles the plan with its estimators and compiles the tracer where its cache
+    misses (another machine): the estimators' hook modules are imported there too, or the
+    kernels would compile without them and tally nothing."""
+    import pickle
+
+    plan = Plan.from_config(vcavities(0.5))
+    assert plan.estimators and plan.tracer_class  # built, cached, pickled with the plan, as a run has them
+    done = subprocess.run([sys.executable, "-c", UNPICKLED_PLAN], input=pickle.dumps(plan), capture_output=True,
+                          cwd=HERE.parent)
+    assert done.returncode == 0, done.stderr.decode()
+    assert done.stdout.decode().split("\n")[0] == "['ExitBinsTally', 'PointsTally']"

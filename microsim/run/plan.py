@@ -6,7 +6,7 @@ number of paths; work is cut into units (realization r, incidence i), the random
 unit keyed by (seed, r, i) and the geometry of realization r by (seed, r), so that a unit's
 tally does not depend on which process traced it. The plan resolves what the config leaves
 open here (the backend, and the scene as that backend can trace it), and builds the run's
-parts (its sensor, estimators, generator and tracer class) once, when first asked.
+parts (its sensor, estimators and tracer class) once, when first asked.
 """
 
 from __future__ import annotations
@@ -27,8 +27,9 @@ from microsim.tracer.sensor import Sensor
 @dataclass
 class Plan:
     """Everything a worker needs to trace any unit of a run (picklable). Its parts (the sensor,
-    the estimators, the generator and the tracer class) are built once, when first asked, and
-    travel with it: a forked worker inherits them, a Dask worker unpickles them."""
+    the estimators and the tracer class) are built once, when first asked, and travel with it: a
+    forked worker inherits them, a Dask worker unpickles them. The generator, a module, is looked
+    up each time (a module does not pickle)."""
 
     config: object
     scene: dict  # resolved scene parameters
@@ -99,7 +100,7 @@ class Plan:
         """The run's estimators on its sensor (microsim.tracer.estimators)."""
         return estimators.build(self.estimator_names, self.sensor, self)
 
-    @functools.cached_property
+    @property
     def generator(self):
         """The scene generator module of the config's scene kind."""
         return geometry.SCENES[self.config.scene.kind]

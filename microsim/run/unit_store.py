@@ -62,8 +62,11 @@ def fingerprint(plan) -> dict:
         "backend": plan.backend,
         "estimators": list(plan.estimator_names),
         "microsim_version": __version__,
+        # what a unit's numbers depend on: the tracer's sources, and the contract, config and run
+        # that make its incidences, sensor and paths
         "sources": "".join(kernel_cache.package_stamp(root).hex()
-                           for root in (*kernel_cache.tracer_sources(), kernel_cache.PACKAGE / "run")),
+                           for root in (*kernel_cache.tracer_sources(),
+                                        *(kernel_cache.PACKAGE / name for name in ("core", "config", "run")))),
     }
 
 
@@ -128,7 +131,8 @@ class UnitStore:
         """Take the directory for the run this store was checked for: lock it (StoreMismatch if
         another run holds it), drop unit files that do not read back whole, and start it afresh
         (with this run's manifest) unless it holds this run's units."""
-        if self.directory.exists() and not self.directory.is_dir():  # check let it go: --force
+        if self.directory.exists() and not self.directory.is_dir():
+            self._verify()  # a file in its place goes with --force only, as check said, and as it is now
             self.directory.unlink()
         self.directory.mkdir(parents=True, exist_ok=True)
         descriptor = os.open(self.directory, os.O_RDONLY)

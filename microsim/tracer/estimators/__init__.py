@@ -46,9 +46,9 @@ class Estimator:
     name: ClassVar[str]
     #: the NamedTuple class of its tally fields (the kernels' hooks are registered on it)
     Record: ClassVar[type]
-    #: the module that registers its kernel hooks, imported when the estimator is built for a
-    #: tracer (None: its own module registers them); apart, so that reading a table, which reads
-    #: the estimators' declarations, imports no kernel
+    #: the module that registers its kernel hooks, imported when an estimator is made or
+    #: unpickled (None: its own module registers them); apart, so that reading a table, which
+    #: reads the estimators' declarations, imports no kernel
     HOOKS: ClassVar[str | None] = None
     #: the datasets it writes (microsim.core.table_layout.Dataset): the table's declared layout
     DATASETS: ClassVar[tuple] = ()
@@ -60,6 +60,20 @@ class Estimator:
 
     def __init__(self, sensor, plan=None):
         self.sensor, self.plan = sensor, plan
+        self.register_hooks()
+
+    def __setstate__(self, state):
+        """Unpickled (the plan of a Dask worker): its hooks are registered in this process too,
+        so that a kernel compiled here calls them."""
+        self.__dict__.update(state)
+        self.register_hooks()
+
+    @classmethod
+    def register_hooks(cls) -> None:
+        """Import the module that registers its kernel hooks (``HOOKS``; its own module does where
+        it is None), so that a tracer compiled in this process calls them."""
+        if cls.HOOKS is not None:
+            importlib.import_module(cls.HOOKS)
 
     @classmethod
     def wanted(cls, config) -> bool:
@@ -126,8 +140,4 @@ def names_for(config) -> tuple[str, ...]:
 
 def build(names, sensor, plan=None) -> tuple[Estimator, ...]:
     """The estimators ``names`` (of a run: ``plan``) on ``sensor``, their kernel hooks registered."""
-    classes = [get(name) for name in names]
-    for cls in classes:
-        if cls.HOOKS is not None:
-            importlib.import_module(cls.HOOKS)
-    return tuple(cls(sensor, plan) for cls in classes)
+    return tuple(get(name)(sensor, plan) for name in names)
