@@ -37,26 +37,27 @@ def test_builder_keeps_part_order_and_lays_a_base_plane_over_the_tile():
     assert scene.info == {"kind": "test", "triangles": 3}
 
 
+def define_material_kind(name: str) -> type:
+    """A material kind named ``name`` that absorbs everything, defined now."""
+    class Kind(materials.Material):
+        kind: Literal[name]
+        example: ClassVar[dict] = {}
+
+        @staticmethod
+        def sample(prm, states, i, d, n):
+            return d, 0.0, 0.0
+
+    return Kind
+
+
 def test_a_material_kind_is_refused_when_defined_twice_or_after_the_kernels_are_built():
     """A kind's code is its place in the registry; a name defined twice, or a kind defined once
     the kernels' switch over the kinds is built (a module the package does not import before
     it), is refused and leaves the registry as it was."""
     before = dict(materials.MATERIALS)
     with pytest.raises(TypeError, match="defined twice"):
-        class Lambert2(materials.Material):
-            kind: Literal["lambert"]
-            example: ClassVar[dict] = {}
-
-            @staticmethod
-            def sample(prm, states, i, d, n):
-                return d, 0.0, 0.0
+        define_material_kind("lambert")
     with pytest.raises(TypeError, match="before the kernels' switch over the kinds is built"):
-        class Velvet(materials.Material):
-            kind: Literal["velvet"]
-            example: ClassVar[dict] = {}
-
-            @staticmethod
-            def sample(prm, states, i, d, n):
-                return d, 0.0, 0.0
+        define_material_kind("velvet")
     assert [kind.code for kind in materials.MATERIALS.values()] == list(range(len(materials.MATERIALS)))
     assert materials.MATERIALS == before
