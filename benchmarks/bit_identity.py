@@ -42,10 +42,16 @@ PROVENANCE = {"created_utc", "wall_time_s", "backend", "backend_fallback", "sha2
 SHIPPED_PATHS = 20_000
 
 
-def config(scene: dict, material: dict, theta: list, cells: int, run: dict, base: dict | None = None) -> dict:
+def config(scene: dict, material: dict, theta: list, cells: int, run: dict, base: dict | None = None,
+           sensor: dict | None = None) -> dict:
     data = {"scene": scene, "material": material, "illumination": {"theta_i_deg": theta},
-            "sensor": {"cells": cells}, "run": run}
+            "sensor": {"cells": cells, **(sensor or {})}, "run": run}
     return data if base is None else dict(data, base=base)
+
+
+#: the estimators besides the cells: next-event points (directions and retro points) and retro rings
+POINTS_AND_RINGS = {"directions_deg": [[0.0, 0.0], [40.0, 90.0], [75.0, 180.0]], "retro_points_deg": [0.0, 4.0],
+                    "retro_rings": 8, "retro_max_deg": 20.0}
 
 
 SPHERES_030 = {"kind": "poisson_spheres", "volume_fraction": 0.3, "tile": 16.0, "depth": 10.0}
@@ -81,6 +87,15 @@ TEST_CONFIGS = {
                                         {"paths": 40_000, "realizations": 64, "seed": 2}), []),
     "plane-absorber": (config(PLANE, {"kind": "absorber"}, [20.0], 400,
                               {"paths": 1000, "realizations": 64, "seed": 2}), []),
+    "points-rings-spheres": (config(SPHERES_030, LAMBERT_08, [0.0, 60.0], 200,
+                                    {"paths": 20_000, "realizations": 8, "seed": 5}, sensor=POINTS_AND_RINGS), []),
+    "points-rings-spheres-embreex": (config(dict(SPHERES_030, subdivisions=1), LAMBERT_08, [30.0], 200,
+                                            {"paths": 10_000, "realizations": 4, "seed": 5}, sensor=POINTS_AND_RINGS),
+                                     ["--backend", "embreex"]),
+    "points-rings-medium": (config({"kind": "halfspace_medium"}, {"kind": "lambert", "albedo": 0.9}, [0.0, 70.0], 200,
+                                   {"paths": 40_000, "realizations": 8, "seed": 5}, sensor=POINTS_AND_RINGS), []),
+    "points-rings-vcavities": (config({"kind": "vcavities", "roughness": 0.6}, LAMBERT_08, [0.0, 50.0], 200,
+                                      {"paths": 40_000, "realizations": 8, "seed": 5}, sensor=POINTS_AND_RINGS), []),
 }
 
 

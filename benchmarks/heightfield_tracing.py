@@ -38,7 +38,7 @@ from throughput import fused_trace, load, realization, replay, replay_direct  # 
 from microsim.core.tally import SEGMENTS  # noqa: E402
 from microsim.physics.rng import stream_key  # noqa: E402
 from microsim.testing import trace
-from microsim.tracer.estimators import DEFAULT, build  # noqa: E402
+from microsim.tracer.estimators import DEFAULT, build, setups  # noqa: E402
 from microsim.tracer.integrators.grid import GridBackend, walk  # noqa: E402
 from microsim.tracer.integrators.records import Beam  # noqa: E402
 from microsim.tracer.sensor import Sensor  # noqa: E402
@@ -56,9 +56,11 @@ def walk_all(grid, origins, directions, tfar, out):
 
 def grid_trace(scene, sensor, beam, threads: int):
     """(seconds, tally) of the grid backend tracing ``beam``."""
-    backend = GridBackend(scene, build(DEFAULT, sensor), threads)
+    estimators = build(DEFAULT, sensor)
+    backend = GridBackend(scene, estimators, threads)
+    kernel_setups = setups(estimators, beam.wi, 0.0)
     start = time.perf_counter()
-    tally = backend.trace(beam, scene.arrays(), sensor)
+    tally = backend.trace(beam, scene.arrays(), kernel_setups)
     return time.perf_counter() - start, tally
 
 

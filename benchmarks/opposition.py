@@ -33,10 +33,11 @@ import numpy as np
 from report import OUT, save_figures
 
 from microsim import config, models
-from microsim.core.orders import RESULT_ALL_ORDERS
+from microsim.core.orders import ORDERS
 from microsim.models.radiative_transfer import single_scattering
 from microsim.physics.boolean_model import radius_over_free_path
 from microsim.testing import trace
+from microsim.tracer.estimators.retro_rings import RetroRings
 
 PHIS = [0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.3, 0.45, 0.6]
 THETA_I_DEG = [0.0, 30.0]
@@ -75,15 +76,17 @@ def measure(phi, paths, seed):
     result = trace(cfg, threads=2)
     seconds = time.perf_counter() - start
     model = models.create("boolean_spheres_single", albedo=ALBEDO, volume_fraction=phi) if phi <= MODEL_MAX_PHI else None
-    lo, hi = result.sensor.retro_phase_bounds()
+    rings = RetroRings.reaching(RINGS, ring_reach_deg(phi))
+    lo, hi = rings.phase_bounds()
     centre = np.degrees(0.5 * (lo + hi))
     rows = []
     for i in range(len(THETA_I_DEG)):
         wi = result.plan.incidence_direction(i)
-        w, weight = result.sensor.toward(wi).retro_ring_quadrature(wi, 4, 16)
+        w, weight = rings.quadrature(wi, 4, 16)
         wis = np.broadcast_to(wi, w.reshape(-1, 3).shape)
         rt = np.sum(single_scattering(wis, w.reshape(-1, 3), ALBEDO).reshape(weight.shape) * weight, axis=1)
-        f, se = result.retro[i].mean[RESULT_ALL_ORDERS], result.retro[i].stderr[RESULT_ALL_ORDERS]
+        retro = result.estimates["brdf_retro"][i]
+        f, se = retro.mean[ORDERS], retro.stderr[ORDERS]  # the row after the four orders: all of them
         measured, error = f / rt - 1.0, se / rt
         base = measured[-OUTER_RINGS:].mean()
         row = {"theta_i_deg": THETA_I_DEG[i], "excess": measured.tolist(), "excess_stderr": error.tolist(),

@@ -82,7 +82,8 @@ from microsim.core.orders import ORDERS
 from microsim.physics.boolean_model import radius_over_free_path
 from microsim.run.plan import Plan
 from microsim.testing import trace_realizations
-from microsim.tracer.sensor import Sensor
+from microsim.tracer.estimators.points import PointSet
+from microsim.tracer.estimators.retro_rings import RetroRings
 
 THETA_I_DEG = 30.0
 PEAK_PHIS = [0.005, 0.02, 0.1, 0.3]
@@ -138,7 +139,7 @@ def half_width(x, f):
 
 def retro_directions(wi, gamma_deg):
     """Unit vectors of retro points at ``gamma_deg`` about wi (azimuth 0)."""
-    return Sensor.build(1).with_points(retro_points_deg=list(gamma_deg)).point_directions(wi, 0.0)
+    return PointSet.of(retro_points_deg=list(gamma_deg)).directions(wi, 0.0)
 
 
 def peak(phi, paths, seed):
@@ -167,7 +168,7 @@ def peak(phi, paths, seed):
                       "ratio_stderr": ratio_se.tolist(), "height": float(h), "height_stderr": float(h_se),
                       "hwhm_x": float(w), "hwhm_x_stderr": float(w_se)}
     rings = est["brdf_retro"][:, 0]  # (R, rows, rings)
-    case["rings"] = {"gamma_hi_deg": np.degrees(plan.sensor.retro_phase_bounds()[1]).tolist()}
+    case["rings"] = {"gamma_hi_deg": np.degrees(RetroRings.reaching(RINGS, ring_reach_deg(phi)).phase_bounds()[1]).tolist()}
     for name, row in (("order1", 0), ("all_orders", ORDERS)):
         mean = rings[:, row].mean(axis=0)
         se = rings[:, row].std(axis=0, ddof=1) / math.sqrt(REALIZATIONS)
@@ -216,8 +217,8 @@ def efficiency(scene_name, paths, seed, folder):
     plan = Plan.from_config(config.validate({**base, "run": {**base["run"], "seed": seed}}))
     wi = plan.incidence_direction(0)
     sensor = plan.sensor
-    asked = Sensor.build(1).with_points([d for _, d in DIRECTIONS if d is not None])
-    wanted = np.vstack([asked.point_directions(wi, 0.0), wi])  # retro last, as in DIRECTIONS
+    asked = PointSet.of([d for _, d in DIRECTIONS if d is not None])
+    wanted = np.vstack([asked.directions(wi, 0.0), wi])  # retro last, as in DIRECTIONS
     cells = sensor.lookup(wanted)
     centre = sensor.directions()[cells]
     centre_deg = np.stack([np.degrees(np.arccos(np.clip(centre[:, 2], -1, 1))),

@@ -70,7 +70,7 @@ from microsim.core.tally import SEGMENTS
 from microsim.physics.rng import geometry_rng, stream_key
 from microsim.run.plan import Plan
 from microsim.testing import trace
-from microsim.tracer.estimators import DEFAULT, build
+from microsim.tracer.estimators import DEFAULT, build, setups
 from microsim.tracer.integrators.direct import DirectBackend
 from microsim.tracer.integrators.embreex import EmbreexBackend, embree_scene
 from microsim.tracer.integrators.records import Beam
@@ -123,9 +123,11 @@ def realization(cfg, **scene_keys):
 def wavefront_trace(scene, sensor, run, beam):
     """Trace ``beam`` with the wavefront loop on ``run``; (seconds, tally, recorder)."""
     recorder = Recorder(run)
-    backend = EmbreexBackend(scene, build(DEFAULT, sensor), embree=recorder)
+    estimators = build(DEFAULT, sensor)
+    backend = EmbreexBackend(scene, estimators, embree=recorder)
+    kernel_setups = setups(estimators, beam.wi, 0.0)
     start = time.perf_counter()
-    tally = backend.trace(beam, scene.arrays(), sensor)
+    tally = backend.trace(beam, scene.arrays(), kernel_setups)
     return time.perf_counter() - start, tally, recorder
 
 
@@ -150,9 +152,11 @@ def replay_direct(logger) -> float:
 
 def fused_trace(scene, sensor, beam, threads: int, log_rays: int = 0):
     """(seconds, tally, backend) of the direct backend tracing ``beam``."""
-    backend = DirectBackend(scene, build(DEFAULT, sensor), threads, log_rays)
+    estimators = build(DEFAULT, sensor)
+    backend = DirectBackend(scene, estimators, threads, log_rays)
+    kernel_setups = setups(estimators, beam.wi, 0.0)
     start = time.perf_counter()
-    tally = backend.trace(beam, scene.arrays(), sensor)
+    tally = backend.trace(beam, scene.arrays(), kernel_setups)
     return time.perf_counter() - start, tally, backend
 
 

@@ -28,7 +28,8 @@ from scipy import stats
 from microsim import tables
 from microsim.analysis import compare, fit
 from microsim.analysis.averages import QUADRATURE_TOLERANCE, ring_averages
-from microsim.analysis.compare_points import retro_sensor
+from microsim.analysis.judge_points import compare_points
+from microsim.analysis.judge_retro import compare_retro, rings_of
 from microsim.app import session
 from microsim.cli import main
 from microsim.core.table_noise import CHI2_OUTSIDE
@@ -121,7 +122,7 @@ def test_the_z_scores_are_the_points_own(medium):
     """z = (table - model) / stderr at each point, model f at the stored directions."""
     path, _ = medium
     table = tables.load(path)
-    result = compare.compare_points(table, single, "all")
+    result = compare_points(table, single, "all")
     sim, stderr = table.arrays["brdf_points"], table.arrays["brdf_points_stderr"]
     wo = table.arrays["sensor/points_direction"]
     exact = np.stack([single_scattering(wi, d, ALBEDO) for wi, d in zip(table.wi, wo)])
@@ -183,7 +184,7 @@ def correlated(tmp_path_factory):
 def test_hotelling_judges_the_points_where_the_table_holds_their_covariance(correlated):
     path, _ = correlated
     table = tables.load(path)
-    result = compare.compare_points(table, single, "1").as_dict()
+    result = compare_points(table, single, "1").as_dict()
     assert result["points_statistic"] == "hotelling" and "Bonferroni" in result["hotelling_rule"]
     r = table.attrs["realizations"]
     assert r == 16
@@ -209,11 +210,11 @@ def test_hotelling_rejects_an_albedo_half_a_percent_off_that_one_degree_of_freed
     whatever the correlation and see nothing; Hotelling's test sees the albedo off by 0.5 %."""
     path, old = correlated
     off = {"albedo": ALBEDO * 1.005}
-    new = compare.compare_points(tables.load(path), single, "1", **off).as_dict()
+    new = compare_points(tables.load(path), single, "1", **off).as_dict()
     for row in new["per_incidence"]:
         assert row["hotelling_f"] > row["hotelling_bounds"][1] and not row["consistent"], row
     assert not new["overall"]["consistent"] and new["overall"]["p_value_min"] < 1e-6
-    before = compare.compare_points(tables.load(old), single, "1", **off).as_dict()
+    before = compare_points(tables.load(old), single, "1", **off).as_dict()
     assert before["points_statistic"] == "chi2_1dof" and "brdf_points_covariance" in before["points_statistic_note"]
     for row in [*before["per_incidence"], before["overall"]]:
         assert row["points_statistic"] == "chi2_1dof" and "hotelling_f" not in row and "p_value" not in row
@@ -231,7 +232,7 @@ def test_an_incidence_with_as_many_points_as_realizations_falls_back(tmp_path, c
     and the fit weighs each point by its own error."""
     cfg = correlated_config(paths=4_000, realizations=4)
     path = session.run(cfg, tmp_path / "few.h5").tables[0]
-    result = compare.compare_points(tables.load(path), single, "1").as_dict()
+    result = compare_points(tables.load(path), single, "1").as_dict()
     assert result["points_statistic"] == "hotelling" and result["overall"]["incidences_chi2_1dof"] == 2
     for row in result["per_incidence"]:
         assert row["points_statistic"] == "chi2_1dof" and "as many as the realizations" in row["points_statistic_note"]
@@ -262,10 +263,10 @@ def test_hotelling_and_the_fit_over_seeds(tmp_path):
     for seed in range(6):
         table = tables.load(session.run(correlated_config(seed=20 + seed, paths=4_000),
                                         tmp_path / f"seed{seed}.h5").tables[0])
-        result = compare.compare_points(table, single, "1").as_dict()
+        result = compare_points(table, single, "1").as_dict()
         assert result["overall"]["consistent"], result["overall"]
         p += [row["p_value"] for row in result["per_incidence"]]
-        assert not compare.compare_points(table, single, "1", albedo=ALBEDO * 1.005).as_dict()["overall"]["consistent"]
+        assert not compare_points(table, single, "1", albedo=ALBEDO * 1.005).as_dict()["overall"]["consistent"]
         value, error = fit.fit(table, single, ["albedo"], {"albedo": 0.5}, "1", on="points").free["albedo"]
         pulls.append((value - ALBEDO) / error)
     assert stats.kstest(p, "uniform").pvalue > 0.01, sorted(p)
@@ -292,14 +293,14 @@ def test_ring_averages_are_the_cos_weighted_mean_over_each_ring(medium):
     horizon only where the last ring touches it)."""
     path, _ = medium
     table = tables.load(path)
-    sensor = retro_sensor(table)
+    rings = rings_of(table)
     wi = table.wi[1]
-    averages, _, _ = ring_averages(single, sensor, wi, np.full(sensor.retro_rings, 1e-6))
+    averages, _, _ = ring_averages(single, rings, wi, np.full(rings.count, 1e-6))
     rng = np.random.default_rng(4)
     v = rng.normal(size=(2_000_000, 3))
     v /= np.linalg.norm(v, axis=1)[:, None]
-    ring = np.floor(np.linalg.norm(v - wi, axis=1) / sensor.retro[3]).astype(int)
-    keep = (ring < sensor.retro_rings) & (v[:, 2] > 0)
+    ring = np.floor(np.linalg.norm(v - wi, axis=1) / rings.step).astype(int)
+    keep = (ring < rings.count) & (v[:, 2] > 0)
     ring, f, cos = ring[keep], single(np.broadcast_to(wi, v[keep].shape), v[keep]), v[keep, 2]
     weight = np.bincount(ring, weights=cos)
     mean = np.bincount(ring, weights=f * cos) / weight
@@ -334,7 +335,7 @@ def test_a_plane_s_points_are_exact(plane, capsys):
     it is 1e-7 off; a fit meets them with 0 degrees of freedom, not fewer, and no chi^2 / dof."""
     table = tables.load(plane)
     for albedo, consistent, p in ((0.5, True, 1.0), (0.5 * (1 + 1e-7), False, 0.0)):
-        result = compare.compare_points(table, "lambert", albedo=albedo).as_dict()
+        result = compare_points(table, "lambert", albedo=albedo).as_dict()
         rows = [*result["per_incidence"], result["overall"]]
         assert all(r["chi2_per_point"] is None and r["chi2_bounds"] is None for r in rows)
         assert all(r["consistent"] is consistent for r in rows)
@@ -364,9 +365,9 @@ def test_compare_and_fit_take_one_on_keyword_from_python(plane, medium):
     one line by both."""
     exact, rings = tables.load(plane), tables.load(medium[0])
     for table, on, direct, model, albedo in (
-            (exact, "points", compare.compare_points, "lambert", 0.5),
+            (exact, "points", compare_points, "lambert", 0.5),
             (exact, "cells", compare.compare_cells, "lambert", 0.5),
-            (rings, "retro", compare.compare_retro, "lambert", 0.5)):
+            (rings, "retro", compare_retro, "lambert", 0.5)):
         result = compare.compare(table, model, "1" if table is rings else "all", on=on, albedo=albedo).as_dict()
         assert result == direct(table, model, "1" if table is rings else "all", albedo=albedo).as_dict()
         assert result.get("on", "cells") == on

@@ -1,26 +1,40 @@
-"""The estimator seam: a new estimator is one module and one registration (tests/toy_estimator.py),
-and the runner, the unit store and the table writer carry its outputs by name.
+"""The estimator seam: a new estimator with a config key and a comparison is one module and one
+registration (tests/toy_estimator.py), and the config, the runner, the unit store, the table
+writer, compare, fit and the CLI carry its keys, outputs and judge without naming it.
 
 The checks run in a process of their own, with a numba cache of their own: the toy's hook is
 compiled into microsim's kernels, whose cache stamp then covers its file (microsim.tracer.jit.kernel_cache),
-and the suite's other processes, which do not register it, keep theirs.
+and the suite's other processes, which do not register it, keep theirs. The registration comes
+before anything imports ``microsim.config``, whose ``[sensor]`` section is composed of the
+registered estimators' keys when it is imported.
 """
 
+import json
+import math
 import os
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
+from click.testing import CliRunner
 
 from microsim import tables
-from microsim.config import validate
+from microsim.cli import cli
+from microsim.config import ConfigError, validate
 from microsim.run import unit_store
 from microsim.run.plan import Plan
 from microsim.testing import trace, trace_albedos, write_table
 from microsim.tracer import estimators
 
 HERE = Path(__file__).resolve().parent
+
+
+def plane(cone_deg: float) -> dict:
+    """A Lambertian plane of albedo 0.5 at three incidences, the cone of ``cone_deg`` tallied."""
+    return {"scene": {"kind": "plane"}, "material": {"kind": "lambert", "albedo": 0.5},
+            "illumination": {"theta_i_deg": [0.0, 40.0, 75.0]}, "sensor": {"cells": 50, "cone_deg": cone_deg},
+            "run": {"paths": 400_000, "realizations": 8, "seed": 2}}
 
 
 def vcavities(albedo, paths=20_000):
@@ -31,24 +45,56 @@ def vcavities(albedo, paths=20_000):
 
 
 def check_a_registered_estimator_writes_its_dataset(tmp_path):
-    """On white V-cavities every path keeps weight 1 (no absorption, no roulette), so the fraction
-    of paths leaving after k interactions is the albedo of order k, which the exit binning counts
-    by weight: the two estimators agree to rounding, in every realization (stderr too)."""
-    cfg = vcavities(1.0)
+    """Over the whole hemisphere (the key's default) the cone's f by order is the albedo by
+    order over pi, which the exit binning sums over its cells: the two agree to rounding, in
+    every realization (stderr too)."""
+    cfg = vcavities(0.9)
     path = write_table(cfg, tmp_path / "t.h5")
-    table = tables.load(path).arrays
-    fraction, error = table["exit_fraction_order"], table["exit_fraction_order_stderr"]
-    assert fraction.shape == (2, 4)
-    assert np.allclose(fraction, table["albedo_order"], rtol=1e-12, atol=0)
-    assert np.allclose(error, table["albedo_order_stderr"], rtol=1e-9, atol=1e-15)
-    assert np.allclose(fraction.sum(axis=1), 1.0, rtol=1e-12)
+    table = tables.load(path)
+    cone, error = table.arrays["brdf_cone_order"] * math.pi, table.arrays["brdf_cone_order_stderr"] * math.pi
+    assert cone.shape == (2, 4) and table.attrs["cone_deg"] == 90.0
+    assert np.allclose(cone, table.arrays["albedo_order"], rtol=1e-12, atol=0)
+    assert np.allclose(error, table.arrays["albedo_order_stderr"], rtol=1e-9, atol=1e-15)
 
 
 def check_an_estimator_counts_each_albedo_of_a_run_of_several(tmp_path):
-    """Counts do not depend on the albedo: every table of a run of several holds the same."""
-    first, second = trace_albedos(vcavities([0.5, 1.0], paths=4000))
-    a, b = (np.stack([e.mean for e in r.estimates["exit_fraction_order"]]) for r in (first, second))
-    assert np.array_equal(a, b) and np.allclose(a.sum(axis=1), 1.0, rtol=1e-12)
+    """Each table of a run of several albedos holds the cone of its own albedo."""
+    for result in trace_albedos(vcavities([0.5, 1.0], paths=4000)):
+        cone = np.stack([e.mean[:4] for e in result.estimates["brdf_cone"]]) * math.pi
+        albedo = np.stack([e.mean[:4] for e in result.estimates["albedo"]])
+        assert np.allclose(cone, albedo, rtol=1e-12, atol=0)
+
+
+def check_its_key_is_a_config_key_and_refused_out_of_range(tmp_path):
+    """Its key joins [sensor], with its range: one line naming it refuses a value outside."""
+    assert validate(plane(40.0)).sensor.cone_deg == 40.0
+    try:
+        validate(plane(120.0))
+    except ConfigError as refused:
+        assert "sensor.cone_deg" in str(refused) and "\n" not in str(refused), str(refused)
+    else:
+        raise AssertionError("cone_deg = 120 was not refused")
+
+
+def check_compare_and_fit_judge_it_by_its_flag(tmp_path):
+    """On a Lambertian plane of albedo 0.5 the cone's f is 0.5 / pi: ``compare --cone`` finds
+    the model of that albedo consistent and one 4 % off not (about 13 standard errors); ``fit
+    --cone`` finds the albedo within 3 of its standard errors, which are about 0.3 %."""
+    path = write_table(validate(plane(40.0)), tmp_path / "plane.h5")
+    runner = CliRunner()
+    verdicts = []
+    for albedo in (0.5, 0.52):
+        done = runner.invoke(cli, ["compare", str(path), "--model", "lambert", "--param", f"albedo={albedo}",
+                                   "--cone", "--json"])
+        assert done.exit_code == 0, done.output
+        result = json.loads(done.output)
+        assert result["on"] == "cone" and result["overall"]["cones_compared"] == 3
+        verdicts.append(result["overall"]["consistent"])
+    assert verdicts == [True, False]
+    done = runner.invoke(cli, ["fit", str(path), "--model", "lambert", "--free", "albedo", "--cone", "--json"])
+    assert done.exit_code == 0, done.output
+    value, error = (json.loads(done.output)["fit"]["albedo"][k] for k in ("value", "stderr"))
+    assert 0 < error < 0.005 and abs(value - 0.5) < 3 * error, (value, error)
 
 
 def check_the_unit_store_keeps_and_gives_back_an_estimators_fields(tmp_path):
@@ -58,7 +104,8 @@ def check_the_unit_store_keeps_and_gives_back_an_estimators_fields(tmp_path):
     traced = trace(cfg, store=store)
     saved = store.load(plan.units[0])[0]
     # the points' record is every run's (empty without points: one kernel for runs with and without)
-    assert [type(record).__name__ for record in saved.estimates] == ["ExitBinsTally", "PointsTally", "ExitCountsTally"]
+    assert [type(record).__name__ for record in saved.estimates] == ["ExitBinsTally", "RetroRingsTally", "PointsTally",
+                                                                      "ConeTally"]
     resumed = trace(cfg, store=store)  # every unit from the store
     assert resumed.units_traced == 0
     for name, estimates in traced.estimates.items():
@@ -66,25 +113,25 @@ def check_the_unit_store_keeps_and_gives_back_an_estimators_fields(tmp_path):
             assert np.array_equal(mine.mean, theirs.mean) and np.array_equal(mine.stderr, theirs.stderr)
 
 
+#: the registration of the toy, made in the test's process before microsim.config is imported
+REGISTRATION = "from microsim.tracer import estimators; estimators.ESTIMATORS['cone'] = 'toy_estimator:Cone'"
+
+
 def main(directory: str) -> None:
-    """Register the toy estimator and run every check (in the subprocess of the test)."""
-    estimators.ESTIMATORS["exit_counts"] = "toy_estimator:ExitCounts"
+    """Run every check (in the subprocess of the test, the toy registered)."""
+    assert estimators.ESTIMATORS["cone"] == "toy_estimator:Cone"
     for name, check in sorted(globals().items()):
         if name.startswith("check_"):
             (Path(directory) / name).mkdir()
             check(Path(directory) / name)
 
 
-def test_a_toy_estimator_is_one_module_and_one_registration(tmp_path):
+def test_a_toy_estimator_with_a_key_and_a_comparison_is_one_module_and_one_registration(tmp_path):
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba"),
            "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])}
-    done = subprocess.run([sys.executable, "-c", f"import test_estimators; test_estimators.main({str(tmp_path)!r})"],
+    done = subprocess.run([sys.executable, "-c", f"{REGISTRATION}; import test_estimators; test_estimators.main({str(tmp_path)!r})"],
                           env=env, capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stderr[-3000:]
-
-
-if __name__ == "__main__":
-    main(sys.argv[1])
 
 
 #: unpickles a run's plan as a Dask worker does, then lists the records whose exit hook is registered
@@ -107,4 +154,4 @@ def test_a_plan_unpickled_in_another_process_has_its_estimators_hooks_registered
     done = subprocess.run([sys.executable, "-c", UNPICKLED_PLAN], input=pickle.dumps(plan), capture_output=True,
                           cwd=HERE.parent)
     assert done.returncode == 0, done.stderr.decode()
-    assert done.stdout.decode().split("\n")[0] == "['ExitBinsTally', 'PointsTally']"
+    assert done.stdout.decode().split("\n")[0] == "['ExitBinsTally', 'PointsTally', 'RetroRingsTally']"

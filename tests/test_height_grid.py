@@ -29,7 +29,7 @@ from microsim.testing import trace_table
 from microsim.testing.bounds import chi2_bound, chi2_lower_bound
 from microsim.testing.refusals import assert_run_refused, small_config
 from microsim.testing.surfaces import RIDGE_SAMPLES, ridges
-from microsim.tracer.estimators import DEFAULT, build
+from microsim.tracer.estimators import DEFAULT, build, setups
 from microsim.tracer.integrators.direct import DirectBackend
 from microsim.tracer.integrators.grid import HeightGrid, walk
 from microsim.tracer.integrators.records import Beam
@@ -61,8 +61,9 @@ def test_the_walk_finds_embree_s_hits_on_the_tracer_s_queries():
     sensor = Sensor.build(100)
     origins, directions, tfar = [], [], []
     for k in range(plan.n_incidences):
-        backend = DirectBackend(scene, build(DEFAULT, sensor), 1, log_rays=3000)
-        backend.trace(Beam(np.asarray(plan.incidence_direction(k)), np.uint64(k), 1000, 0), scene.arrays(), sensor)
+        estimators, wi = build(DEFAULT, sensor), np.asarray(plan.incidence_direction(k))
+        backend = DirectBackend(scene, estimators, 1, log_rays=3000)
+        backend.trace(Beam(wi, np.uint64(k), 1000, 0), scene.arrays(), setups(estimators, wi, 0.0))
         log = backend.ray_log
         origins.append(log[:, :3]), directions.append(log[:, 3:6]), tfar.append(log[:, 6])
     origins, directions, tfar = (np.concatenate(c) for c in (origins, directions, tfar))

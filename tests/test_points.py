@@ -29,6 +29,7 @@ from microsim.core.orders import ORDERS
 from microsim.physics.phase import phase_lambert_sphere
 from microsim.run.plan import Plan
 from microsim.testing import trace_realizations
+from microsim.tracer.estimators.points import PointSet
 
 #: two-sided level of the Hotelling bounds
 ALPHA = 1e-3
@@ -37,6 +38,11 @@ ALPHA = 1e-3
 def per_realization(cfg: dict):
     """(plan, every realization's estimates by name) of the config dict ``cfg``."""
     return trace_realizations(config.validate(cfg))
+
+
+def points_of(plan) -> PointSet:
+    """The points a run's config asks for."""
+    return PointSet.of(plan.config.sensor.directions_deg, plan.config.sensor.retro_points_deg)
 
 
 def hotelling(deviations: np.ndarray) -> tuple[float, float, float]:
@@ -120,11 +126,11 @@ def medium_config(phase: str, max_order: int, paths: int, realizations: int, see
 def test_the_media_order_1_is_c_p_over_mu_i_plus_mu_o_at_every_point():
     plan, est = per_realization(medium_config("lambert_sphere", 1, 800_000, 40))
     points = est["brdf_points"][:, :, 0]  # order 1: (R, n_i, K)
-    sensor = plan.sensor
+    asked = points_of(plan)
     exact = np.zeros(points.shape[1:])
     for i in range(plan.n_incidences):
         wi = plan.incidence_direction(i)
-        wo = sensor.point_directions(wi, plan.phi_i[i])
+        wo = asked.directions(wi, plan.phi_i[i])
         exact[i] = 0.9 * phase_lambert_sphere(-(wo @ wi)) / (wi[2] + wo[:, 2])
     assert_mean((points - exact) / exact, "order 1 against c p / (mu_i + mu_o)")
     assert not est["brdf_points"][:, :, 1:ORDERS].any()  # max_order = 1: nothing beyond order 1
@@ -134,10 +140,10 @@ def test_the_media_order_1_is_c_p_over_mu_i_plus_mu_o_at_every_point():
 def test_the_isotropic_media_points_are_rte_isotropic_at_every_point():
     plan, est = per_realization(medium_config("isotropic", 0, 1_200_000, 40))
     points = est["brdf_points"][:, :, ORDERS]  # all orders (the row after the four orders)
-    sensor = plan.sensor
+    asked = points_of(plan)
     model = models.create("rte_isotropic", albedo=0.9)
-    exact = np.array([model(np.broadcast_to(plan.incidence_direction(i), (sensor.n_points, 3)),
-                            sensor.point_directions(plan.incidence_direction(i), plan.phi_i[i]))
+    exact = np.array([model(np.broadcast_to(plan.incidence_direction(i), (len(asked), 3)),
+                            asked.directions(plan.incidence_direction(i), plan.phi_i[i]))
                       for i in range(plan.n_incidences)])
     assert_mean((points - exact) / exact, "all orders against rte_isotropic")
 
@@ -156,11 +162,11 @@ def test_lambertian_v_cavities_order_1_is_interfaced_lambert_at_eta_1_with_the_v
            "run": {"paths": 600_000, "realizations": 40, "seed": 5, "max_order": 1}}
     plan, est = per_realization(cfg)
     points = est["brdf_points"][:, :, 0]
-    sensor = plan.sensor
+    asked = points_of(plan)
     model = models.create("interfaced_lambert", albedo=0.8, eta=1.0, roughness=0.6, distribution="beckmann",
                           gaf="torrance_sparrow")
-    exact = np.array([model(np.broadcast_to(plan.incidence_direction(i), (sensor.n_points, 3)),
-                            sensor.point_directions(plan.incidence_direction(i), plan.phi_i[i]))
+    exact = np.array([model(np.broadcast_to(plan.incidence_direction(i), (len(asked), 3)),
+                            asked.directions(plan.incidence_direction(i), plan.phi_i[i]))
                       for i in range(plan.n_incidences)])
     assert_mean((points - exact) / exact, "order 1 against interfaced_lambert (eta 1, Torrance-Sparrow G)")
 
@@ -350,22 +356,26 @@ def test_every_albedo_of_a_list_has_the_points_of_its_own_run(tmp_path):
             assert np.all(np.abs(a - b) < 4.5 * se + 1e-300) and b[:, 3].min() > 0
 
 
-def test_a_run_with_points_takes_the_kernel_a_run_without_them_compiled():
-    """numba specializes the tracer on the estimators' records and the sensor: a run with points
+def test_a_run_with_points_or_rings_takes_the_kernel_a_run_without_them_compiled():
+    """numba specializes the tracer on the estimators' records and setups: a run with points
     gave them a record type of their own, and its first run compiled a second tracer as long as
-    the first (11 s here, 51 s on a slower host). Both runs now hand the kernels the same types,
-    so the kernel one compiled is the other's; without points nothing of theirs is written."""
+    the first (11 s here, 51 s on a slower host). Every run now hands the kernels the same types,
+    with points or retro rings or neither, so the kernel one compiled is the others'; without
+    points or rings nothing of theirs is written."""
     import numba
+
+    from microsim.tracer import estimators
 
     base = {"scene": {"kind": "poisson_spheres", "volume_fraction": 0.3},
             "material": {"kind": "lambert", "albedo": 0.8},
             "illumination": {"theta_i_deg": [30.0]}, "run": {"paths": 1000}}
     plans = [Plan.from_config(config.validate({**base, "sensor": sensor}))
-             for sensor in ({"cells": 100}, {"cells": 100, "directions_deg": [[0.0, 0.0]], "retro_points_deg": [1.0]})]
-    assert plans[0].estimator_names == plans[1].estimator_names
+             for sensor in ({"cells": 100}, {"cells": 100, "directions_deg": [[0.0, 0.0]], "retro_points_deg": [1.0]},
+                            {"cells": 100, "retro_rings": 5})]
+    assert plans[0].estimator_names == plans[1].estimator_names == plans[2].estimator_names
     types = []
     for plan in plans:
-        sensor = plan.sensor
         records = tuple(estimator.allocate(4, 1) for estimator in plan.estimators)
-        types.append((numba.typeof(records), numba.typeof(sensor.points)))
-    assert types[0] == types[1]
+        setups = estimators.setups(plan.estimators, plan.incidence_direction(0), plan.phi_i[0])
+        types.append((numba.typeof(records), numba.typeof(setups)))
+    assert types[0] == types[1] == types[2]

@@ -29,6 +29,7 @@ from microsim.core.orders import ORDERS
 from microsim.core.tally import TRANSMITTED, TRUNCATED
 from microsim.physics.rng import stream_key
 from microsim.tracer.estimators import build
+from microsim.tracer.estimators.points import Points, PointsKeys
 from microsim.tracer.integrators.records import allocate_rays
 from microsim.tracer.integrators.surface import SurfaceTracer
 from microsim.tracer.integrators.surface_transport import (
@@ -82,8 +83,12 @@ def direction(theta_deg: float, phi_deg: float = 0.0) -> np.ndarray:
     return np.array([math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)])
 
 
-def trace(scene, backend: str, paths: int, sensor, realization: int = 0, theta: float = 60.0, phi: float = 30.0):
-    estimators = build(("exit_bins", "points") if len(sensor.points) else ("exit_bins",), sensor)
+def trace(scene, backend: str, paths: int, sensor, realization: int = 0, theta: float = 60.0, phi: float = 30.0,
+          points=()):
+    """The tally of ``paths`` paths, binned on ``sensor`` and, with ``points`` ([theta_o, phi_o]
+    pairs, deg), read there by next-event estimation too."""
+    estimators = build(("exit_bins",), sensor) + ((Points(sensor, keys=PointsKeys(directions_deg=points)),)
+                                                  if points else ())
     tracer = SurfaceTracer(scene, sensor, backend, estimators=estimators)
     return tracer.trace(direction(theta, phi), paths, stream_key(5, realization, 0), 0)
 
@@ -200,12 +205,12 @@ def test_a_white_ridge_on_a_rectangular_tile_returns_every_path(backend):
         assert tally.energy[TRUNCATED] <= 1.0, (theta, phi)  # a grazing path or none
 
 
-def cell_estimates(scene, backend, sensor, realizations, paths):
+def cell_estimates(scene, backend, sensor, realizations, paths, points):
     """Per realization (streams (5, r, 0)): the albedo by order and the f of each point, both
     divided as a table divides them (the same factor for both tiles)."""
     rows = []
     for r in range(realizations):
-        tally = trace(scene, backend, paths, sensor, realization=r)
+        tally = trace(scene, backend, paths, sensor, realization=r, points=points)
         rows.append(np.concatenate([tally.estimates[0].weight[0, :ORDERS].sum(axis=1),
                                     tally.estimates[1].weight[0].sum(axis=0)]) / paths)
     return np.array(rows)
@@ -215,10 +220,10 @@ def cell_estimates(scene, backend, sensor, realizations, paths):
 def test_the_ridge_on_the_rectangular_tile_matches_it_on_the_square_tile(backend):
     """Invariant in y, the ridge gives the same paths on 4 x 1 and 4 x 4 but for round-off: the
     albedos by order and the next-event points agree to a quarter of their standard errors."""
-    sensor = Sensor.build(100).with_points(directions_deg=[[50.0, 0.0], [70.0, 180.0], [60.0, 90.0]])
+    sensor, points = Sensor.build(100), [[50.0, 0.0], [70.0, 180.0], [60.0, 90.0]]
     realizations, paths = 6, 4000
-    rect = cell_estimates(ridge_scene(LY, 0.8), backend, sensor, realizations, paths)
-    square = cell_estimates(ridge_scene(LX, 0.8), backend, sensor, realizations, paths)
+    rect = cell_estimates(ridge_scene(LY, 0.8), backend, sensor, realizations, paths, points)
+    square = cell_estimates(ridge_scene(LX, 0.8), backend, sensor, realizations, paths, points)
     stderr = np.hypot(rect.std(axis=0, ddof=1), square.std(axis=0, ddof=1)) / math.sqrt(realizations)
     assert np.all(stderr > 0)
     gap = np.abs(rect.mean(axis=0) - square.mean(axis=0)) / stderr

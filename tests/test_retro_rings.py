@@ -1,5 +1,5 @@
 """Retro rings (``[sensor] retro_rings``): the fine tally about the retro direction that resolves
-the opposition peak (microsim/tracer/sensor.py). Checked against exact BRDFs, on rings that the horizon
+the opposition peak (microsim/tracer/estimators/retro_rings.py). Checked against exact BRDFs, on rings that the horizon
 cuts as well as whole ones, and shown not to disturb the ordinary tables."""
 
 import math
@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from microsim import config, tables
-from microsim.core.orders import RESULT_ALL_ORDERS
+from microsim.core.orders import ORDERS
 from microsim.models.radiative_transfer import single_scattering
 from microsim.testing import trace
 from microsim.testing.bounds import chi2_bound, chi2_lower_bound
 from microsim.testing.refusals import assert_run_refused, small_config
-from microsim.tracer.sensor import Sensor
+from microsim.tracer.estimators.retro_rings import RetroRings
 from microsim.tracer.sensor_kernels import retro_ring
 
 REALIZATIONS = 32
@@ -34,10 +34,10 @@ def assert_consistent(mean_z2, n):
 
 
 def test_projected_solid_angle_of_rings_cut_by_the_horizon_matches_monte_carlo():
-    sensor = Sensor.build(10).with_retro_rings(6, 24.0)
+    rings = RetroRings.reaching(6, 24.0)
     wi = np.array([math.sin(math.radians(84.0)), 0.0, math.cos(math.radians(84.0))])
-    exact = sensor.toward(wi).retro_projected_solid_angle(wi)
-    lo, hi = sensor.retro_phase_bounds()
+    exact = rings.projected_solid_angle(wi)
+    lo, hi = rings.phase_bounds()
     uncut = math.pi * wi[2] * (np.cos(lo) ** 2 - np.cos(hi) ** 2)
     assert exact[0] == pytest.approx(uncut[0], rel=1e-12)  # ring 0 (gamma < 4 deg) stays above the horizon
     assert np.all(exact[2:] > uncut[2:] * 1.05)  # rings 2-5 reach 6 deg and more below it
@@ -45,7 +45,7 @@ def test_projected_solid_angle_of_rings_cut_by_the_horizon_matches_monte_carlo()
     n = 4_000_000
     v = rng.normal(size=(n, 3))
     v /= np.linalg.norm(v, axis=1)[:, None]
-    ring = (np.linalg.norm(v - wi, axis=1) / sensor.retro[3]).astype(int)
+    ring = (np.linalg.norm(v - wi, axis=1) / rings.step).astype(int)
     ok = (ring < 6) & (v[:, 2] > 0)
     weights = v[ok, 2] * 4 * math.pi / n
     estimate = np.bincount(ring[ok], weights=weights, minlength=6)
@@ -57,8 +57,8 @@ def test_projected_solid_angle_of_rings_cut_by_the_horizon_matches_monte_carlo()
 @pytest.mark.slow
 def test_lambertian_plane_is_albedo_over_pi_on_every_ring(theta, phi):
     _, result = run({"kind": "plane"}, [theta], [phi], rings=12, max_deg=30.0, paths=1_000_000)
-    retro = result.retro[0]
-    z = (retro.mean[RESULT_ALL_ORDERS] - 0.6 / math.pi) / retro.stderr[RESULT_ALL_ORDERS]
+    retro = result.estimates["brdf_retro"][0]
+    z = (retro.mean[ORDERS] - 0.6 / math.pi) / retro.stderr[ORDERS]
     assert_consistent(np.mean(z * z), len(z))
 
 
@@ -70,9 +70,10 @@ def test_medium_order_one_is_single_scattering_averaged_over_each_ring():
     _, result = run(scene, [0.0, 75.0], [0.0, 0.0], rings=10, max_deg=25.0, paths=1_000_000, albedo=0.8)
     for i in range(2):
         wi = result.plan.incidence_direction(i)
-        w, weight = result.sensor.toward(wi).retro_ring_quadrature(wi)
+        w, weight = RetroRings.reaching(10, 25.0).quadrature(wi)
         expected = np.sum(weight * single_scattering(np.broadcast_to(wi, w.shape), w, 0.8), axis=1)
-        z = (result.retro[i].mean[0] - expected) / result.retro[i].stderr[0]
+        retro = result.estimates["brdf_retro"][i]
+        z = (retro.mean[0] - expected) / retro.stderr[0]
         assert_consistent(np.mean(z * z), len(z))
 
 
@@ -82,8 +83,8 @@ def test_rings_leave_the_ordinary_table_bit_identical(tmp_path):
     cfg_rings, rings = run(scene, [0.0, 60.0], [0.0, 0.0], rings=40, max_deg=10.0, paths=20_000)
     for a, b in zip(plain.brdf + plain.albedo + plain.energy, rings.brdf + rings.albedo + rings.energy):
         assert np.array_equal(a.mean, b.mean) and np.array_equal(a.stderr, b.stderr)
-    assert plain.retro == [] and len(rings.retro) == 2
-    assert rings.retro[0].mean[RESULT_ALL_ORDERS].sum() > 0
+    assert "brdf_retro" not in plain.estimates and len(rings.estimates["brdf_retro"]) == 2
+    assert rings.estimates["brdf_retro"][0].mean[ORDERS].sum() > 0
     table = tables.load(tables.write(tmp_path / "rings.h5", rings, cfg_rings))
     assert table.arrays["brdf_retro"].shape == (2, 40)
     assert table.arrays["brdf_retro_order"].shape == (2, 4, 40)
@@ -102,10 +103,9 @@ def test_float32_exit_directions_near_retro_land_in_their_ring():
     """Exit directions come from float32 rays (length off 1 by ~1e-7): the ring of a direction
     must come from its chord to wi, not from 1 - d.wi, whose error would be a chord error of
     sqrt(2e-7) = 0.03 deg, more than a ring of 0.005 deg (ring 0 then took 2.4 times its share)."""
-    sensor = Sensor.build(10).with_retro_rings(100, 0.5)
+    rings = RetroRings.reaching(100, 0.5)
     wi = np.array([math.sin(0.7), 0.0, math.cos(0.7)])
-    sensor = sensor.toward(wi)
-    lo, hi = sensor.retro_phase_bounds()
+    lo, hi = rings.phase_bounds()
     rng = np.random.default_rng(4)
     ring = rng.integers(0, 100, 20_000)
     gamma = lo[ring] + (hi[ring] - lo[ring]) * rng.uniform(0.05, 0.95, ring.size)
@@ -113,5 +113,6 @@ def test_float32_exit_directions_near_retro_land_in_their_ring():
     u, v = np.array([-math.cos(0.7), 0.0, math.sin(0.7)]), np.array([0.0, 1.0, 0.0])
     d = (np.cos(gamma)[:, None] * wi + np.sin(gamma)[:, None] * (np.cos(psi)[:, None] * u + np.sin(psi)[:, None] * v))
     d = d.astype(np.float32).astype(np.float64)  # as the tracer reads an exit back
-    found = np.array([retro_ring((x[0], x[1], x[2]), sensor) for x in d])
+    about = rings.about(wi)
+    found = np.array([retro_ring((x[0], x[1], x[2]), about) for x in d])
     assert np.mean(found == ring) > 0.999

@@ -9,7 +9,7 @@ is converged too (a narrow specular lobe at grazing incidence on flat grains lea
 short if such cells stop at 8 x 8). The largest remaining change is reported, in standard
 errors (for cells without one, in their albedo share over QUADRATURE_TOLERANCE).
 
-The retro rings are averaged the same way (:meth:`microsim.tracer.sensor.Sensor.retro_ring_quadrature`,
+The retro rings are averaged the same way (:meth:`microsim.tracer.estimators.retro_rings.RetroRings.quadrature`,
 n x 4 n nodes a ring). :class:`CellRule` and :class:`RingRule` hold a settled rule fixed, so
 that a model's averages at other parameters cost one evaluation (``microsim fit``).
 """
@@ -21,7 +21,7 @@ import numpy as np
 QUADRATURE_TOLERANCE = 0.05
 ALBEDO_TOLERANCE = 1e-4
 QUADRATURE_RULES = (4, 8, 16, 32, 64, 128)
-#: the retro rings' rules: n x 4 n nodes a ring (Sensor.retro_ring_quadrature), refined as the cells' are
+#: the retro rings' rules: n x 4 n nodes a ring (RetroRings.quadrature), refined as the cells' are
 RING_RULES = (8, 16, 32, 64)
 
 
@@ -83,15 +83,15 @@ class CellRule:
         return np.bincount(self.cells, weights=model(self.wi, self.nodes) * self.weights, minlength=self.n_cells)
 
 
-def ring_averages(model, sensor, wi: np.ndarray, stderr: np.ndarray, tolerance: float = QUADRATURE_TOLERANCE):
-    """``model`` averaged over every retro ring of ``sensor`` about wi, cos-weighted (n x 4 n
+def ring_averages(model, rings, wi: np.ndarray, stderr: np.ndarray, tolerance: float = QUADRATURE_TOLERANCE):
+    """``model`` averaged over every retro ring of ``rings`` (a RetroRings) about wi, cos-weighted (n x 4 n
     nodes a ring, n of RING_RULES), refined until no ring moves by more than ``tolerance`` of
     its standard error (a ring without one: ALBEDO_TOLERANCE of its value). Returns the
     averages, the largest last change in standard errors and the n settled on (which
     :class:`RingRule` can hold fixed)."""
     previous, change = None, np.zeros(len(stderr))
     for n in RING_RULES:
-        averages = RingRule(sensor, wi, n).averages(model)
+        averages = RingRule(rings, wi, n).averages(model)
         if previous is not None:
             floor = np.where(stderr > 0, stderr, ALBEDO_TOLERANCE * np.abs(averages) / tolerance)
             change = np.divide(np.abs(averages - previous), floor, out=np.zeros_like(floor), where=floor > 0)
@@ -105,8 +105,8 @@ class RingRule:
     """A fixed quadrature of every retro ring about wi, n x 4 n nodes a ring, as
     :class:`CellRule` is of the cells."""
 
-    def __init__(self, sensor, wi: np.ndarray, n: int):
-        self.nodes, self.weights = sensor.retro_ring_quadrature(wi, n, 4 * n)
+    def __init__(self, rings, wi: np.ndarray, n: int):
+        self.nodes, self.weights = rings.quadrature(wi, n, 4 * n)
         self.wi = np.broadcast_to(wi, self.nodes.shape)
 
     def averages(self, model) -> np.ndarray:

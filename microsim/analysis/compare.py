@@ -10,9 +10,10 @@ are too large.
 
 The model is averaged over each cell as the table is (:mod:`microsim.analysis.averages`), over
 the cells with signal (:mod:`microsim.analysis.selection`). :func:`compare` dispatches on what
-a comparison is on: the cells here, the points and retro rings in
-:mod:`microsim.analysis.compare_points`; a table against another table, or against a tabulated
-BRDF of other cells, is compared cell by cell too.
+a comparison is on to the estimators' judges (:mod:`microsim.analysis.judges`): the cells'
+(:data:`CELLS`) here, the points' and the retro rings' in :mod:`microsim.analysis.judge_points` and
+:mod:`microsim.analysis.judge_retro`; a table against another table, or against a tabulated BRDF
+of other cells, is compared cell by cell too.
 """
 
 from __future__ import annotations
@@ -21,8 +22,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from microsim.analysis import judges
 from microsim.analysis.averages import ALBEDO_TOLERANCE, CellRule, cell_averages
-from microsim.analysis.compare_points import PointComparison, compare_points, compare_retro
+from microsim.analysis.fitted import fitted_cells
+from microsim.analysis.judges import DEFAULT_ON, Judge
 from microsim.analysis.selection import (
     SIGNAL_TO_NOISE,
     config_degrees,
@@ -150,16 +153,14 @@ class Comparison:
         }
 
 
-def compare(table, model, order: str = "all", on: str = "cells", **params) -> Comparison | PointComparison:
+def compare(table, model, order: str = "all", on: str = DEFAULT_ON, **params):
     """Compare ``model`` with ``table`` (a :class:`microsim.tables.Table`) on what ``on`` names, as
-    :func:`microsim.analysis.fit.fit` takes it: "cells" (:func:`compare_cells`), "points"
-    (:func:`compare_points`) or "retro" (:func:`compare_retro`, the retro rings); ValueError (one
+    :func:`microsim.analysis.fit.fit` takes it: "cells" (:func:`compare_cells`) or the word of
+    another estimator's judge (:mod:`microsim.analysis.judges`: "points", "retro"); ValueError (one
     line) for another ``on``. ``model``: a model (``models.create(...)``), a registered model's
     name, a :class:`~microsim.models.BRDFModel` subclass or a plain function ``f(wi, wo, **params)``
     (:mod:`microsim.models.user_models`), made with ``params``."""
-    if on not in COMPARE_ON:
-        raise ValueError(f"on = {on!r}: accepted: {', '.join(map(repr, COMPARE_ON))}")
-    return COMPARE_ON[on](table, model, order, **params)
+    return judges.judge(on).compare(table, model, order, **params)
 
 
 def compare_cells(table, model, order: str = "all", **params) -> Comparison:
@@ -267,8 +268,9 @@ def not_independent(table, other, same_values: bool = False) -> str | None:
     return None
 
 
-#: what compares a model with a table, by what it compares on
-COMPARE_ON = {"cells": compare_cells, "points": compare_points, "retro": compare_retro}
+#: the judge of the cells (microsim.analysis.judges), the exit binning's
+CELLS = Judge(on=DEFAULT_ON, unit="cell", dataset="brdf", counted="cells_with_signal", keys="[sensor] cells",
+              geometry=(), help="", compare=compare_cells, fitted=fitted_cells)
 
 
 def albedo_bound(correlation: np.ndarray) -> float:

@@ -1,5 +1,5 @@
-"""What a comparison reads of a table: the rows of an order (``--order``), of the cells, points
-or retro rings, checked present and finite (ValueError, one line, naming the dataset), and
+"""What a comparison reads of a table: the rows of an order (``--order``), of the cells or of what
+another judge compares (:mod:`microsim.analysis.judges`), checked present and finite (ValueError, one line, naming the dataset), and
 which cells have signal.
 
 Metrics are taken over the cells with signal, where the table value exceeds ``SIGNAL_TO_NOISE``
@@ -18,14 +18,6 @@ BASE = "base"
 #: orders 1 and 2 together, brdf_orders12 (the f2 of Meneveaux et al. 2015, Sec. 3.3)
 ORDERS12 = "orders12"
 ORDER_ROWS = {"all": None, "1": 0, "2": 1, "3": 2, "4+": 3, "1+2": ORDERS12, "1-base": BASE}
-#: what --points and --retro compare on (PointComparison.on): the word for one, the datasets, the
-#: count of those judged, and the config that makes them
-ON = {
-    "points": ("point", "brdf_points", "points_compared", "[sensor] directions_deg or retro_points_deg"),
-    "retro": ("ring", "brdf_retro", "rings_with_signal", "[sensor] retro_rings"),
-}
-
-
 def signal_or_refusal(table, sim, stderr, order: str) -> np.ndarray:
     """:func:`with_signal` of the table's ``order``; ValueError (one line) if no cell has signal."""
     signal = with_signal(sim, stderr)
@@ -58,12 +50,15 @@ def selection(table, order: str):
     return selected
 
 
-def extra_selection(table, order: str, on: str):
-    """(f, its standard error) of the table's points (``on`` = "points") or retro rings
-    ("retro") of ``order``, each (n_i, n), checked present and finite (ValueError, one line)."""
+def extra_selection(table, order: str, judge):
+    """(f, its standard error) of the table's values that ``judge`` (a
+    :class:`microsim.analysis.judges.Judge` other than the cells') compares, of ``order``, each
+    (n_i, n), checked present and finite (ValueError, one line). Orders 1 and 2 together and the
+    base's part of order 1 are refused: the table holds neither for them, and the error of the
+    sum of two order rows needs their covariance."""
     if order not in ORDER_ROWS:
         raise ValueError(f"order {order!r}; accepted: {', '.join(ORDER_ROWS)}")
-    _, name, _, config = ON[on]
+    on, name = judge.on, judge.dataset
     row = ORDER_ROWS[order]
     if row == ORDERS12:
         raise ValueError(f"--order 1+2 with --{on}: the table holds its {name} by order but not the covariance of "
@@ -71,39 +66,15 @@ def extra_selection(table, order: str, on: str):
     if row == BASE:
         raise ValueError(f"--order 1-base with --{on}: the table holds no base part of order 1 in {name}")
     dataset = name if row is None else f"{name}_order"
-    geometry = ("sensor/points_direction",) if on == "points" else \
-        ("sensor/retro_gamma_lo", "sensor/retro_gamma_hi", "sensor/retro_projected_solid_angle")
-    missing = [k for k in (dataset, f"{dataset}_stderr", *geometry) if k not in table.arrays]
+    missing = [k for k in (dataset, f"{dataset}_stderr", *judge.geometry) if k not in table.arrays]
     if missing:
-        raise ValueError(f"--{on}: table {table.path} has no {', '.join(missing)} (its config has no {config}, or it "
-                         "was written before they existed)")
+        raise ValueError(f"--{on}: table {table.path} has no {', '.join(missing)} (its config has no {judge.keys}, "
+                         "or it was written before they existed)")
     names = (dataset, f"{dataset}_stderr")
     values, stderr = (table.arrays[k] if row is None else table.arrays[k][:, row] for k in names)
     for k, v in zip(names, (values, stderr)):
-        require_finite(v, f"table {table.path}: {k} (order {order})", ON[on][0] + "s")
+        require_finite(v, f"table {table.path}: {k} (order {order})", judge.unit + "s")
     return values, stderr
-
-
-def points_covariance(table, order: str) -> np.ndarray | None:
-    """(n_i, n_d, n_d) the covariance of the mean of the table's points of ``order`` (checked
-    by :func:`extra_selection`), brdf_points_covariance or a row of brdf_points_order_covariance;
-    None for a table without it (written before it existed). ValueError (one line) if not finite."""
-    row = ORDER_ROWS[order]
-    name = "brdf_points_covariance" if row is None else "brdf_points_order_covariance"
-    if name not in table.arrays:
-        return None
-    covariance = table.arrays[name] if row is None else table.arrays[name][:, row]
-    require_finite(covariance, f"table {table.path}: {name} (order {order})", "entries")
-    return covariance
-
-
-def repeated_points(directions: np.ndarray) -> np.ndarray:
-    """(n_i, n_d) True where a point's direction (n_i, n_d, 3) is an earlier point's of its
-    incidence (normal incidence: the retro point at gamma = 0 is the direction [0, 0]): the same
-    estimate, compared once."""
-    gap = np.linalg.norm(directions[:, :, None] - directions[:, None, :], axis=-1)
-    earlier = np.tril(np.ones(gap.shape[1:], bool), -1)
-    return np.any((gap < 1e-12) & earlier, axis=2)
 
 
 def selected_rows(table, row):

@@ -3,43 +3,53 @@
 
 from __future__ import annotations
 
-import functools
 from pathlib import Path
 
 import click
 
+from microsim.analysis import judges
+from microsim.analysis.judges import DEFAULT_ON
 from microsim.analysis.selection import ORDER_ROWS
 from microsim.cli.entry import BadInput, cli
 from microsim.cli.inputs import MODEL_HELP, load_table, model_class, model_parameters, user_model_errors
 from microsim.cli.report import print_comparison
 from microsim.core import files
 
-
-def on_points_or_rings(command):
-    """The --points and --retro flags of compare and fit (what they compare or fit instead of the
-    cells), handed to ``command`` as one argument ``on``: "cells", "points" or "retro" (:func:`_on`)."""
-
-    @functools.wraps(command)
-    def with_on(*args, on_points, on_retro, **kwargs):
-        return command(*args, on=_on(on_points, on_retro, kwargs["plot_dir"]), **kwargs)
-
-    flagged = click.option("--retro", "on_retro", is_flag=True,
-                           help="instead of the cells, the table's retro rings (sensor.retro_rings): the model "
-                                "averaged over each ring, cos-weighted, against brdf_retro, each ring judged as a "
-                                "cell; no albedo, not with --points")(with_on)
-    return click.option("--points", "on_points", is_flag=True,
-                        help="instead of the cells, the table's points (sensor.directions_deg, "
-                             "sensor.retro_points_deg): the model at each exact direction against brdf_points "
-                             "(next-event estimation), nothing averaged; no albedo, not with --retro")(flagged)
+#: the parameter name of the flag --<on>: "on_" and the judge's word
+FLAG_PREFIX = "on_"
 
 
-def _on(on_points: bool, on_retro: bool, plot_dir) -> str:
-    """What --points and --retro ask to compare or fit: "cells", "points" or "retro"; BadInput
-    for both, or either with --plot (the figures are of cells)."""
-    if on_points and on_retro:
-        raise BadInput("--points, --retro: give one of them (the points and the retro rings are compared apart)")
-    on = "points" if on_points else "retro" if on_retro else "cells"
-    if on != "cells" and plot_dir is not None:
+class JudgedCommand(click.Command):
+    """compare and fit: a flag --<on> for every estimator's judge but the cells'
+    (:func:`microsim.analysis.judges.flagged`: --points, --retro), what they compare or fit
+    instead of the cells, handed to the command as one argument ``on`` (:func:`_on`). The flags
+    are added when the command's parameters are first asked for (its help, its parsing), so that
+    the rest of the CLI loads none of the estimators' declarations."""
+
+    def get_params(self, ctx):
+        if not any(param.name.startswith(FLAG_PREFIX) for param in self.params):
+            flagged = judges.flagged()
+            at = next((k for k, param in enumerate(self.params) if param.name == "as_json"), len(self.params))
+            self.params[at:at] = [
+                click.Option([f"--{on}", FLAG_PREFIX + on], is_flag=True,
+                             help=judge.help + "".join(f"; not with --{other}" for other in flagged if other != on))
+                for on, judge in flagged.items()]
+        return super().get_params(ctx)
+
+    def invoke(self, ctx):
+        flags = [name for name in ctx.params if name.startswith(FLAG_PREFIX)]
+        asked = [name[len(FLAG_PREFIX):] for name in flags if ctx.params.pop(name)]
+        ctx.params["on"] = _on(asked, ctx.params.get("plot_dir"))
+        return super().invoke(ctx)
+
+
+def _on(asked: list[str], plot_dir) -> str:
+    """What the flags ``asked`` ask to compare or fit: "cells" without one, else its word;
+    BadInput for two, or one with --plot (the figures are of cells)."""
+    if len(asked) > 1:
+        raise BadInput(f"{', '.join('--' + on for on in asked)}: give one of them (each is compared apart)")
+    on = asked[0] if asked else DEFAULT_ON
+    if on != DEFAULT_ON and plot_dir is not None:
         raise BadInput(f"--plot: the figures are of the cells; leave it out with --{on}")
     return on
 
@@ -51,7 +61,7 @@ def _check_plot_dir(plot_dir) -> None:
         raise BadInput(why)
 
 
-@cli.command()
+@cli.command(cls=JudgedCommand)
 @click.argument("table_path", metavar="TABLE.h5", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--model", "model_name", required=True, help=MODEL_HELP)
 @click.option("--param", "params", multiple=True, metavar="KEY=VALUE", help="model parameter, repeatable")
@@ -59,7 +69,6 @@ def _check_plot_dir(plot_dir) -> None:
               help="compare with one scattering order of the table, orders 1 and 2 together (1+2, the "
                    "f2 of two-bounce models), or the part of order 1 that the base scattered (1-base; "
                    "scenes with a base)")
-@on_points_or_rings
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object")
 @click.option("--plot", "plot_dir", type=click.Path(file_okay=False, path_type=Path),
               help="write PNG figures (polar maps, plane of incidence) into this directory (cells only)")
@@ -85,7 +94,7 @@ def compare(table_path, model_name, params, order, on, as_json, plot_dir):
     print_comparison(result, table, f"{model!r} vs {table_path}", as_json, plot_dir, result.as_dict())
 
 
-@cli.command()
+@cli.command(cls=JudgedCommand)
 @click.argument("table_path", metavar="TABLE.h5", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--model", "model_name", required=True, help=MODEL_HELP)
 @click.option("--free", "free", multiple=True, metavar="KEY", help="parameter to fit, repeatable")
@@ -93,7 +102,6 @@ def compare(table_path, model_name, params, order, on, as_json, plot_dir):
               help="fixed model parameter, or the starting value of a free one; repeatable")
 @click.option("--order", type=click.Choice(list(ORDER_ROWS)), default="all", show_default=True,
               help="fit one scattering order of the table (as for compare)")
-@on_points_or_rings
 @click.option("--json", "as_json", is_flag=True, help="print one JSON object: compare's, with a key fit")
 @click.option("--plot", "plot_dir", type=click.Path(file_okay=False, path_type=Path),
               help="write PNG figures of the best fit into this directory (cells only)")

@@ -13,7 +13,7 @@ def print_comparison(result, table, title, as_json, plot_dir, json_object) -> No
     """compare's per-incidence and overall figures (or ``json_object``), and its figures."""
     import json
 
-    from microsim.analysis.compare_points import PointComparison
+    from microsim.analysis.point_comparison import PointComparison
     from microsim.analysis.selection import SIGNAL_TO_NOISE
     from microsim.core.table_noise import CHI2_OUTSIDE
 
@@ -55,27 +55,12 @@ def print_comparison(result, table, title, as_json, plot_dir, json_object) -> No
 
 def _print_points(result, title) -> None:
     """compare's per-incidence and overall figures at the points or on the retro rings."""
-    from microsim.analysis.compare_points import EXACT_POINT
-    from microsim.analysis.selection import ON, SIGNAL_TO_NOISE
-    from microsim.core.table_noise import CHI2_OUTSIDE
+    from microsim.analysis.point_comparison import EXACT_POINT
 
-    unit, _, count, _ = ON[result.on]
+    unit, count = result.unit, result.counted
     rows = result.as_dict()
     hotelling = rows.get("points_statistic") == "hotelling" or "p_value_min" in rows["overall"]
-    level = f"{100 * (1 - CHI2_OUTSIDE):g} % two-sided"
-    if hotelling:
-        what = ("points: the model at each exact direction (next-event estimation); per incidence Hotelling's F of "
-                f"the points with the covariance of their errors, {level} bounds (an incidence with too few "
-                "realizations: chi^2 per point, bounds of 1 degree of freedom); overall: every incidence at the "
-                "Bonferroni level")
-    elif result.on == "points":
-        what = ("points: the model at each exact direction (next-event estimation), every point but where both are "
-                f"0; exact points (no spread) must match to {EXACT_POINT:g}; chi^2 per point: 1 "
-                "expected for the model of the table, bounds of 1 degree of freedom (the table holds no covariance "
-                f"of the points' errors), {level}")
-    else:
-        what = (f"retro rings with signal: table > {SIGNAL_TO_NOISE:g} standard errors; chi^2 per "
-                f"ring: 1 expected for the model of the table, {level}")
+    what = result.summary()
     click.echo(f"{title} (order {result.order}; {what}; no albedo rows: the albedo sums the cells, not the {unit}s)")
     statistic = "F or chi2" if hotelling else f"chi2/{unit}"
     click.echo(f"{'theta_i':>8} {'phi_i':>6} {unit + 's':>6} {'med|rel|':>9} {'rel rmse':>9} {'max|z|':>9} "

@@ -4,6 +4,7 @@ value given (an excerpt of it), what is accepted."""
 from __future__ import annotations
 
 from microsim.config import fields
+from microsim.core.schema import excerpt
 
 
 class ConfigError(ValueError):
@@ -50,21 +51,6 @@ def describe_error(error: dict, data: dict, model) -> str:
     if kind in ("too_short", "too_long") and isinstance(value, list):
         problem = f"{len(value):,} items, out of range"
     return f"{key}{shown}: {problem}; {fields.accepted(node, error)}"
-
-
-#: characters of a value a message quotes
-EXCERPT = 60
-
-
-def excerpt(value) -> str:
-    """``repr(value)``, or its first items and length if that is longer than EXCERPT characters."""
-    text = repr(value)
-    if len(text) <= EXCERPT:
-        return text
-    if isinstance(value, list):
-        head = ", ".join(excerpt(item) for item in value[:3])
-        return f"[{head}, ... ({len(value):,} items)]"
-    return text[:EXCERPT - 3] + "..."
 
 
 _RANGE_ERRORS = {"greater_than", "greater_than_equal", "less_than", "less_than_equal", "too_short", "too_long"}

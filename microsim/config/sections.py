@@ -7,7 +7,6 @@ generator registry (``geometry.SCENES``) and material kinds from the material re
 
 from __future__ import annotations
 
-import numbers
 from typing import Annotated, Literal, Union
 
 import pydantic
@@ -16,17 +15,10 @@ from pydantic import Field
 from microsim import geometry
 from microsim.config import full_brdf
 from microsim.config.full_brdf import MAX_INCIDENCES
-from microsim.config.messages import excerpt
 from microsim.core.choices import BACKEND_CHOICES
 from microsim.core.schema import Section
+from microsim.tracer import estimators
 from microsim.tracer.materials import MATERIALS
-from microsim.tracer.sensor import MAX_POINTS
-
-
-def _is_number(value) -> bool:
-    """A real number, of Python or numpy, not a bool."""
-    return isinstance(value, numbers.Real) and not isinstance(value, bool)
-
 
 AnyMaterial = Annotated[Union[tuple(MATERIALS.values())], Field(discriminator="kind")]
 Scene = Annotated[Union[tuple(g.Config for g in geometry.SCENES.values())], Field(discriminator="kind")]
@@ -76,68 +68,17 @@ class Illumination(Section):
         return list(self.phi_i_deg)
 
 
-class SensorSection(Section):
+class SensorKeys(Section):
+    """The sensor's own key of ``[sensor]``: its cells."""
+
     cells: int = Field(3240, ge=1, le=1_000_000, description="cells of the equal-solid-angle sensor, approximately "
                        "(the table stores the actual cells)")
-    retro_rings: int = Field(0, ge=0, le=100_000, description="rings about the retro direction, tallied "
-                             "apart from the cells (0: none); see microsim.tracer.sensor")
-    retro_max_deg: float = Field(10.0, gt=0.0, le=90.0, description="phase angle the retro rings reach, deg")
-    directions_deg: list[list[float]] = Field(
-        [], description="exact directions [theta_o, phi_o] (phi_o the relative azimuth phi_o - phi_i; the "
-                        "cells' azimuths are the scene's), deg, theta_o in [0, 90), "
-                        f"phi_o in [-360, 360]: f there by next-event estimation (at most {MAX_POINTS} points "
-                        "with retro_points_deg)")
-    retro_points_deg: list[float] = Field(
-        [], description="phase angles gamma in [0, 90) deg from the retro direction, towards the normal in the "
-                        "plane of incidence: f there by next-event estimation")
 
-    @pydantic.field_validator("directions_deg", mode="before")
-    @classmethod
-    def _directions(cls, value):
-        """A list of [theta_o, phi_o] pairs of numbers, theta_o in [0, 90), phi_o in [-360, 360]."""
-        accepted = "accepted: a list of [theta_o, phi_o] pairs, theta_o in [0, 90) and phi_o in [-360, 360] deg"
-        value = value.tolist() if hasattr(value, "tolist") else value  # a numpy array from Python
-        if not isinstance(value, (list, tuple)):
-            raise ValueError(f"directions_deg = {excerpt(value)}: not a list; {accepted}")
-        for k, pair in enumerate(value):
-            if not isinstance(pair, (list, tuple)) or len(pair) != 2 or not all(map(_is_number, pair)):
-                raise ValueError(f"directions_deg[{k}] = {excerpt(pair)}: not a pair of numbers; {accepted}")
-            theta, phi = pair
-            if not 0.0 <= theta < 90.0:
-                where = "below the horizon" if theta >= 90.0 else "out of range"
-                raise ValueError(f"directions_deg[{k}] = {excerpt(pair)}: theta_o {where}; {accepted}")
-            if not -360.0 <= phi <= 360.0:
-                raise ValueError(f"directions_deg[{k}] = {excerpt(pair)}: phi_o out of range; {accepted}")
-        return [[float(theta), float(phi)] for theta, phi in value]
 
-    @pydantic.field_validator("retro_points_deg", mode="before")
-    @classmethod
-    def _retro_points(cls, value):
-        """A list of numbers in [0, 90)."""
-        accepted = "accepted: a list of phase angles in [0, 90) deg"
-        value = value.tolist() if hasattr(value, "tolist") else value  # a numpy array from Python
-        if not isinstance(value, (list, tuple)) or not all(map(_is_number, value)):
-            raise ValueError(f"retro_points_deg = {excerpt(value)}: not a list of numbers; {accepted}")
-        for k, gamma in enumerate(value):
-            if not 0.0 <= gamma < 90.0:
-                raise ValueError(f"retro_points_deg[{k}] = {excerpt(gamma)}: out of range; {accepted}")
-        return [float(gamma) for gamma in value]
-
-    @pydantic.model_validator(mode="after")
-    def _at_most_max_points(self):
-        count = len(self.directions_deg) + len(self.retro_points_deg)
-        if count > MAX_POINTS:
-            # the key of the longer list: the one to shorten
-            key = "directions_deg" if len(self.directions_deg) >= len(self.retro_points_deg) else "retro_points_deg"
-            raise ValueError(f"sensor.{key}: {len(self.directions_deg):,} directions_deg and "
-                             f"{len(self.retro_points_deg):,} retro_points_deg, {count:,} points; accepted: at "
-                             f"most {MAX_POINTS} points together (each costs a shadow ray per scattering event)")
-        return self
-
-    @property
-    def n_points(self) -> int:
-        """Points of next-event estimation asked for (directions and retro points)."""
-        return len(self.directions_deg) + len(self.retro_points_deg)
+#: ``[sensor]``: the sensor's cells, then the keys each estimator declares (``Estimator.KEYS``), in
+#: the estimators' order (pydantic lays out the fields of the last base first)
+SensorSection = pydantic.create_model("SensorSection", __base__=tuple(reversed((SensorKeys, *estimators.keys()))),
+                                      __module__=__name__)
 
 
 class Run(Section):
@@ -178,14 +119,8 @@ class Config(Section):
         return full_brdf.expand(data, SensorSection.model_fields["cells"].default)
 
     @pydantic.model_validator(mode="after")
-    def _points_see_light(self):
-        """Next-event estimation sees the lobes that are not a Dirac delta: a scene whose every
-        material reflects by delta lobes or absorbs has nothing to show it."""
-        materials = [self.material] + ([self.base] if self.base is not None else [])
-        if self.sensor.n_points and not any(m.continuous for m in materials):
-            kinds = ", ".join(f"{name}.kind = {m.kind!r}" for name, m in zip(("material", "base"), materials))
-            key = "sensor.directions_deg" if self.sensor.directions_deg else "sensor.retro_points_deg"
-            raise ValueError(f"{key}: next-event estimation sees no light in this scene ({kinds}: delta lobes "
-                             "or absorption only); accepted: a scene with a lambert or interfaced_lambert "
-                             "material, or no points (the cells see delta lobes)")
+    def _estimators_agree(self):
+        """What each estimator checks of the whole config (``Estimator.check``)."""
+        for cls in estimators.classes():
+            cls.check(self)
         return self

@@ -6,6 +6,7 @@ import math
 
 from microsim.run import executors
 from microsim.run.plan import Plan, PlanError
+from microsim.tracer import estimators
 
 #: what the main process holds before any scene (interpreter, numpy, numba, Embree, kernels):
 #: 225 MiB resident measured on phi = 0.3
@@ -25,7 +26,7 @@ def memory_estimate(plan: Plan, workers: int, spawned: bool = False) -> int:
     albedos = max(1, len(plan.albedos))
     tally = 8 * albedos * sum(estimator.tally_values() for estimator in plan.estimators)
     working = plan.tracer_class.working_bytes(plan.backend, plan.threads, plan.paths_per_realization, tally,
-                                              plan.sensor.n_points)
+                                              estimators.shadow_rays(plan.estimators))
     tracing = plan.generator.scene_bytes(plan.scene) + working + 2 * tally
     units = len(plan.units)
     processes = len(executors.split(plan.units, max(1, workers)))

@@ -90,10 +90,8 @@ class Plan:
 
     @functools.cached_property
     def sensor(self) -> Sensor:
-        """The run's sensor: its cells, and its retro rings and points if the config asks for them."""
-        section = self.config.sensor
-        return (Sensor.build(self.sensor_cells).with_retro_rings(section.retro_rings, section.retro_max_deg)
-                .with_points(section.directions_deg, section.retro_points_deg))
+        """The run's sensor: its cells."""
+        return Sensor.build(self.sensor_cells)
 
     @functools.cached_property
     def estimators(self) -> tuple:

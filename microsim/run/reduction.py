@@ -93,11 +93,6 @@ class Result:
         return self.estimates["albedo"]
 
     @property
-    def retro(self) -> list:
-        """Per incidence, if the sensor has retro rings: Estimate of f over (RESULT_ROWS, rings)."""
-        return self.estimates.get("brdf_retro", [])
-
-    @property
     def paths(self) -> np.ndarray:
         return np.full(self.plan.n_incidences, self.plan.paths, dtype=np.int64)
 

@@ -17,21 +17,8 @@ bins as floor(atan2(y, x) n_k / 2 pi + 1/2) did, except within rounding (~1e-16 
 edge, at a third of the cost of a search loop (measurements: docs/developer/performance.md,
 section 'Sensor lookup per exit').
 
-Retro rings (optional, ``[sensor] retro_rings``): a second, finer tally of the exits near the
-retro direction wi, for the opposition peak. Ring b holds the directions whose chord to wi,
-|wo - wi| = 2 sin(gamma / 2) (gamma the phase angle), lies in [b, b + 1) times a fixed step, out
-to ``retro_max_deg``: rings of nearly equal width in gamma, found with one square root. Their
-f is the cos(theta_o)-weighted mean of the BRDF over the part of the ring above the horizon,
-like a cell's.
-
-Points (optional, ``[sensor] directions_deg`` and ``retro_points_deg``): exact directions at
-which next-event estimation (:mod:`microsim.tracer.estimators.points`) reads f, not cells. A direction
-is (theta_o, phi_o) with phi_o the relative azimuth (conventions §1): phi_i + phi_o in the
-scene's frame. A retro point at phase angle gamma is the retro direction wi turned by gamma
-towards the normal, in the plane of incidence: theta_o = theta_i - gamma on the side of the
-light, and past the normal (on the specular side) where gamma > theta_i. The sensor holds them
-as given (``point_spec``) and, once turned :meth:`toward` an incidence, as unit vectors
-(``points``) that the kernels read.
+The sensor is the cells alone: the retro rings and the points are estimators' own
+(:mod:`microsim.tracer.estimators.retro_rings`, :mod:`microsim.tracer.estimators.points`).
 """
 
 from __future__ import annotations
@@ -42,12 +29,6 @@ from typing import NamedTuple
 import numpy as np
 
 from microsim.core.frames import direction
-
-#: most points (directions and retro points together) a run reads f at: each costs a shadow ray
-#: per scattering event
-MAX_POINTS = 256
-#: kinds of point (``Sensor.point_spec``): a direction (theta_o, relative phi_o), a retro point (gamma)
-DIRECTION_POINT, RETRO_POINT = 0.0, 1.0
 
 
 class Sensor(NamedTuple):
@@ -62,13 +43,6 @@ class Sensor(NamedTuple):
     ring_of: np.ndarray  # (N,) ring of each solid-angle slot floor((1 - z) N)
     edge_x: np.ndarray  # (N,) cos of each cell's lower phi edge, (j - 1/2) 2 pi / n_k
     edge_y: np.ndarray  # (N,) its sin
-    #: retro rings: (wi_x, wi_y, wi_z, chord step, ring count); no rings by default (see the module doc)
-    retro: np.ndarray = np.array([0.0, 0.0, 1.0, 1.0, 0.0])
-    #: points (see the module doc), one row each: (DIRECTION_POINT, theta_o, phi_o) or
-    #: (RETRO_POINT, gamma, 0), radians; none by default
-    point_spec: np.ndarray = np.zeros((0, 3))
-    #: the points' unit vectors about the incidence of :meth:`toward` (before it: about the zenith)
-    points: np.ndarray = np.zeros((0, 3))
 
     @classmethod
     def from_ring_counts(cls, ring_counts) -> "Sensor":
@@ -99,112 +73,6 @@ class Sensor(NamedTuple):
     @property
     def n_cells(self) -> int:
         return int(self.ring_start[-1])
-
-    def with_retro_rings(self, rings: int, max_deg: float) -> "Sensor":
-        """This sensor with ``rings`` retro rings out to a phase angle of ``max_deg`` (0: none)."""
-        step = 2.0 * math.sin(math.radians(max_deg) / 2.0) / max(rings, 1)
-        return self._replace(retro=np.array([0.0, 0.0, 1.0, step, float(rings)]))
-
-    def with_points(self, directions_deg=(), retro_points_deg=()) -> "Sensor":
-        """This sensor with the points (module doc) ``directions_deg`` ([theta_o, phi_o] pairs) and
-        ``retro_points_deg`` (phase angles gamma), in that order, degrees."""
-        spec = [(DIRECTION_POINT, math.radians(t), math.radians(p)) for t, p in directions_deg]
-        spec += [(RETRO_POINT, math.radians(g), 0.0) for g in retro_points_deg]
-        spec = np.array(spec, np.float64).reshape(-1, 3)
-        return self._replace(point_spec=spec, points=self.point_directions(np.array([0.0, 0.0, 1.0]), 0.0, spec))
-
-    def toward(self, wi: np.ndarray, phi_i: float | None = None) -> "Sensor":
-        """This sensor with its retro rings centred on the incidence direction wi and its points
-        turned about it; ``phi_i``, the incidence's azimuth, defines the plane of incidence where
-        wi is the normal (else it is wi's own)."""
-        return self._replace(retro=np.array([wi[0], wi[1], wi[2], self.retro[3], self.retro[4]]),
-                             points=self.point_directions(wi, phi_i))
-
-    @property
-    def n_points(self) -> int:
-        return len(self.point_spec)
-
-    def point_directions(self, wi: np.ndarray, phi_i: float | None = None, spec=None) -> np.ndarray:
-        """Unit vectors (n_points, 3) of the points about the incidence wi (module doc); ``phi_i``
-        as :meth:`toward` takes it."""
-        spec = self.point_spec if spec is None else spec
-        wi = np.asarray(wi, np.float64)
-        theta_i, phi_i = math.acos(min(max(float(wi[2]), -1.0), 1.0)), _azimuth(wi, phi_i)
-        theta, phi = spec[:, 1].copy(), phi_i + spec[:, 2]
-        retro = spec[:, 0] == RETRO_POINT
-        turned = theta_i - spec[retro, 1]  # negative: past the normal, on the specular side
-        theta[retro], phi[retro] = np.abs(turned), np.where(turned >= 0.0, phi_i, phi_i + math.pi)
-        return direction(theta, phi).reshape(-1, 3)
-
-    def point_angles(self, wi: np.ndarray, phi_i: float | None = None):
-        """(theta_o, relative phi_o in [0, 2 pi), phase angle gamma from wi) of every point about
-        the incidence wi, radians."""
-        w = self.point_directions(wi, phi_i)
-        wi = np.asarray(wi, np.float64)
-        relative = np.remainder(np.arctan2(w[:, 1], w[:, 0]) - _azimuth(wi, phi_i), 2.0 * math.pi)
-        relative[relative > 2.0 * math.pi - 1e-12] = 0.0  # -0 by rounding
-        relative[(w[:, 0] == 0.0) & (w[:, 1] == 0.0)] = 0.0
-        gamma = 2.0 * np.arcsin(np.clip(np.linalg.norm(w - wi, axis=1) / 2.0, 0.0, 1.0))
-        return np.arccos(np.clip(w[:, 2], -1.0, 1.0)), relative, gamma
-
-    @property
-    def retro_rings(self) -> int:
-        return int(self.retro[4])
-
-    @property
-    def tally_width(self) -> int:
-        """Bins of an exit tally: the cells, then the retro rings."""
-        return self.n_cells + self.retro_rings
-
-    def retro_phase_bounds(self):
-        """(gamma_lo, gamma_hi) of every retro ring, radians."""
-        chord = self.retro[3] * np.arange(self.retro_rings + 1)
-        gamma = 2.0 * np.arcsin(np.clip(chord / 2.0, 0.0, 1.0))
-        return gamma[:-1], gamma[1:]
-
-    def _retro_arcs(self, wi: np.ndarray, nodes: int):
-        """Gauss-Legendre nodes in cos(gamma) over every retro ring about wi, and the visible arc
-        at each: cos(theta_o) = mu_i cos(gamma) + s sin(gamma) cos(psi) (s = sin theta_i, psi the
-        azimuth about wi from its plane of incidence) is positive for |psi| < arc. Returns
-        (cos_gamma, sin_gamma, node weights in cos(gamma), arc), each (n_r, nodes)."""
-        lo, hi = self.retro_phase_bounds()
-        x, w = np.polynomial.legendre.leggauss(nodes)
-        c_lo, c_hi = np.cos(lo)[:, None], np.cos(hi)[:, None]
-        cos_g = c_hi + (c_lo - c_hi) * 0.5 * (x + 1.0)
-        sin_g = np.sqrt(np.clip(1.0 - cos_g**2, 0.0, 1.0))
-        mu_i = float(wi[2])
-        a, b = mu_i * cos_g, math.sqrt(max(1.0 - mu_i * mu_i, 0.0)) * sin_g
-        ratio = np.divide(-a, b, out=np.where(a >= 0, -np.inf, np.inf), where=b > 0)
-        return cos_g, sin_g, 0.5 * (c_lo - c_hi) * w, np.arccos(np.clip(ratio, -1.0, 1.0))
-
-    def retro_ring_quadrature(self, wi: np.ndarray, n_gamma: int = 8, n_psi: int = 32):
-        """Nodes and weights averaging a function over every retro ring about wi with the
-        cos(theta_o) weight, as :meth:`cell_quadrature` does over cells: ``(w (n_r, M, 3),
-        weight (n_r, M))``. Gauss-Legendre in cos(gamma) and, at each, in psi over the arc
-        above the horizon (all of it for a ring that the horizon does not cut)."""
-        wi = np.asarray(wi, np.float64)
-        cos_g, sin_g, w_g, arc = self._retro_arcs(wi, n_gamma)
-        xp, wp = np.polynomial.legendre.leggauss(n_psi)
-        psi = arc[:, :, None] * xp  # (n_r, n_gamma, n_psi)
-        mu_i = wi[2]
-        tangent = math.sqrt(max(1.0 - mu_i * mu_i, 0.0))
-        # u: unit vector normal to wi in its plane of incidence, pointing up; v = wi x u
-        u = np.array([-wi[0] * mu_i, -wi[1] * mu_i, tangent * tangent]) / tangent if tangent > 0 else np.array([1.0, 0, 0])
-        v = np.cross(wi, u)
-        cg, sg = cos_g[:, :, None, None], sin_g[:, :, None, None]
-        w = cg * wi + sg * (np.cos(psi)[..., None] * u + np.sin(psi)[..., None] * v)
-        weight = (w_g[:, :, None] * arc[:, :, None] * wp) * np.clip(w[..., 2], 0.0, None)
-        weight /= np.maximum(weight.sum(axis=(1, 2), keepdims=True), 1e-300)
-        return w.reshape(len(w), -1, 3), weight.reshape(len(w), -1)
-
-    def retro_projected_solid_angle(self, wi: np.ndarray, nodes: int = 64) -> np.ndarray:
-        """Integral of max(cos theta_o, 0) d(omega) over every retro ring about wi: exact in psi
-        (2 (mu_i cos(gamma) arc + s sin(gamma) sin(arc))), Gauss-Legendre in cos(gamma); pi mu_i
-        (cos^2 lo - cos^2 hi) for a ring the horizon does not cut."""
-        cos_g, sin_g, w_g, arc = self._retro_arcs(np.asarray(wi, np.float64), nodes)
-        mu_i = float(wi[2])
-        s = math.sqrt(max(1.0 - mu_i * mu_i, 0.0))
-        return np.sum(2.0 * (mu_i * cos_g * arc + s * sin_g * np.sin(arc)) * w_g, axis=1)
 
     @property
     def n_rings(self) -> int:
@@ -305,9 +173,3 @@ class Sensor(NamedTuple):
         values = func(w.reshape(-1, 3)).reshape(weight.shape)
         return np.sum(values * weight, axis=1)
 
-
-def _azimuth(wi: np.ndarray, phi_i: float | None) -> float:
-    """The incidence's azimuth: ``phi_i`` if given, else wi's own (0 where wi is the normal)."""
-    if phi_i is not None:
-        return float(phi_i)
-    return math.atan2(wi[1], wi[0]) if wi[0] or wi[1] else 0.0

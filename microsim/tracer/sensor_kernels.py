@@ -1,6 +1,6 @@
-"""The sensor's lookups in numba: a direction's cell in O(1) and its retro ring
-(:mod:`microsim.tracer.sensor` says how the cells and rings are laid out), which the exit
-binning's hook calls for every exit. Apart from the sensor's record, so that reading a table
+"""The sensor's lookups in numba: a direction's cell in O(1) (:mod:`microsim.tracer.sensor` says
+how the cells are laid out) and its retro ring (:mod:`microsim.tracer.estimators.retro_rings`),
+which the exit binning's and the rings' hooks call for every exit. Apart from the sensor's record, so that reading a table
 (which rebuilds its sensor) compiles and imports no kernel."""
 
 from __future__ import annotations
@@ -50,9 +50,9 @@ def cell_index(d, sensor):
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def retro_ring(d, sensor):
-    """Retro ring of the exit direction d, or -1 outside the rings (see module docstring)."""
-    r = sensor.retro
+def retro_ring(d, r):
+    """Retro ring of the exit direction d, or -1 outside the rings ``r`` = (wi_x, wi_y, wi_z, chord
+    step, ring count) (:mod:`microsim.tracer.estimators.retro_rings`)."""
     # the chord from its components: 2 (1 - d.wi) would turn the ~1e-7 length error of a float32
     # direction into a chord error of sqrt(2e-7) (0.03 deg) near retro
     q = (d[0] - r[0]) ** 2 + (d[1] - r[1]) ** 2 + (d[2] - r[2]) ** 2

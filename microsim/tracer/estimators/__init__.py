@@ -3,6 +3,11 @@
 An estimator is one module with one :class:`Estimator` subclass and one line in
 :data:`ESTIMATORS`. It declares
 
+- its config keys: a :class:`microsim.core.schema.Section` class ``KEYS`` whose fields join
+  ``[sensor]`` (the config's ``SensorSection`` is the sensor's cells and every estimator's keys),
+  and what it checks of the whole config (:meth:`Estimator.check`);
+- its kernel record for an incidence (:meth:`Estimator.setup`: the sensor's cells, the rings
+  about wi, the points' unit vectors), which its hooks read;
 - its tally fields: a ``NamedTuple`` class ``Record`` (defined in its module, so that numba
   can cache the kernels that take it) whose fields are float64 arrays of the shapes
   :meth:`Estimator.shapes` gives; the tracer allocates them per chunk of paths, after a row
@@ -10,16 +15,21 @@ An estimator is one module with one :class:`Estimator` subclass and one line in
 - its hooks, numba implementations registered on its ``Record`` class in :mod:`.hooks`, in the
   module its ``HOOKS`` names (``exit_bins_hooks``, ``points_hooks``: the declaration imports no
   numba, so that reading a table imports no kernel):
-  ``on_exit`` (a path leaves the surface) and ``on_interaction`` (a path is about to interact);
-  the walk of every integrator calls them (:mod:`microsim.tracer.integrators.walk`);
+  ``on_exit`` (a path leaves the surface) and ``on_interaction`` (a path is about to interact),
+  each called with the estimator's record and its setup; the walk of every integrator calls
+  them (:mod:`microsim.tracer.integrators.walk`);
 - its reduction of a unit's fields to per-realization estimates, named (:meth:`Estimator.reduce`);
   the reducer keeps the mean and standard error of each name over the realizations;
-- the datasets it writes (:meth:`Estimator.write`), from those estimates.
+- the datasets it writes (:meth:`Estimator.write`), from those estimates;
+- how ``compare`` and ``fit`` judge them: ``JUDGE`` names a
+  :class:`microsim.analysis.judges.Judge` ("module:attribute"), which the analysis imports when
+  it judges (the tracer never does).
 
-The reducer (:mod:`microsim.run.runner`), the unit store and the table writer read the estimators'
-outputs by name and know none of them. The estimators: :mod:`.exit_bins`, the binning of exits
-on the sensor's cells (every run), and :mod:`.points`, next-event estimation at the sensor's
-exact directions (runs that ask for points).
+The config, the reducer (:mod:`microsim.run.reduction`), the unit store, the table writer,
+``compare``, ``fit`` and the CLI read the estimators' declarations and know none of them by name.
+The estimators: :mod:`.exit_bins`, the binning of exits on the sensor's cells; :mod:`.retro_rings`,
+a finer binning about the retro direction; :mod:`.points`, next-event estimation at exact
+directions.
 """
 
 from __future__ import annotations
@@ -34,14 +44,18 @@ from microsim.core.tally import albedo_axis
 
 #: estimator name -> "module:class", imported on use; a run uses every estimator whose
 #: :meth:`Estimator.wanted` says so, in this order
-ESTIMATORS = {"exit_bins": "microsim.tracer.estimators.exit_bins:ExitBins", "points": "microsim.tracer.estimators.points:Points"}
+ESTIMATORS = {"exit_bins": "microsim.tracer.estimators.exit_bins:ExitBins",
+              "retro_rings": "microsim.tracer.estimators.retro_rings:RetroRingBins",
+              "points": "microsim.tracer.estimators.points:Points"}
 #: the estimators of a tracer used without a run (tests, benchmarks)
 DEFAULT = ("exit_bins",)
 
 
 class Estimator:
     """What one estimator adds to a run (module doc); built for a run's ``sensor`` and ``plan``
-    (:class:`microsim.run.plan.Plan`; None for a tracer used without a run)."""
+    (:class:`microsim.run.plan.Plan`; None for a tracer used without a run), reading its keys
+    from ``keys`` (a section with its ``KEYS``' fields), else from the plan's ``[sensor]``, else
+    their defaults."""
 
     name: ClassVar[str]
     #: the NamedTuple class of its tally fields (the kernels' hooks are registered on it)
@@ -57,9 +71,17 @@ class Estimator:
     #: the names of :meth:`reduce` whose estimates share their paths along the last axis: the
     #: reducer keeps their covariance too (microsim.run.reduction.Estimate.covariance)
     COVARIANT: ClassVar[tuple] = ()
+    #: its keys of ``[sensor]`` (a microsim.core.schema.Section class), or None
+    KEYS: ClassVar[type | None] = None
+    #: "module:attribute" of the microsim.analysis.judges.Judge that compares a model with what it
+    #: writes, or None (nothing to judge)
+    JUDGE: ClassVar[str | None] = None
 
-    def __init__(self, sensor, plan=None):
+    def __init__(self, sensor, plan=None, keys=None):
         self.sensor, self.plan = sensor, plan
+        if keys is None and self.KEYS is not None:
+            keys = plan.config.sensor if plan is not None else self.KEYS()
+        self.keys = keys
         self.register_hooks()
 
     def __setstate__(self, state):
@@ -79,6 +101,19 @@ class Estimator:
     def wanted(cls, config) -> bool:
         """Whether a run of ``config`` uses this estimator."""
         return True
+
+    @classmethod
+    def check(cls, config) -> None:
+        """Refuse (ValueError, one line naming the key) a whole config its keys do not fit."""
+
+    def setup(self, wi: np.ndarray, phi_i: float):
+        """Its kernel record for the incidence wi of azimuth ``phi_i`` (what its hooks read besides
+        its tally): a numba-typed value whose type is the same at every incidence."""
+        return np.zeros(0)
+
+    def shadow_rays(self) -> int:
+        """Shadow rays it may queue per scattering event (a backend sizes its queue by them)."""
+        return 0
 
     def shapes(self) -> tuple[tuple[int, ...], ...]:
         """The shape of each field of ``Record``, without the row and albedo axes."""
@@ -131,6 +166,27 @@ def datasets() -> tuple:
 def attributes() -> tuple:
     """The root attributes every registered estimator may write (``Estimator.ATTRIBUTES``), in order."""
     return tuple(attribute for name in ESTIMATORS for attribute in get(name).ATTRIBUTES)
+
+
+def classes() -> tuple[type[Estimator], ...]:
+    """Every registered estimator class, in order."""
+    return tuple(get(name) for name in ESTIMATORS)
+
+
+def keys() -> tuple[type, ...]:
+    """The ``[sensor]`` key sections the registered estimators declare, in order."""
+    return tuple(cls.KEYS for cls in classes() if cls.KEYS is not None)
+
+
+def setups(estimators, wi: np.ndarray, phi_i: float) -> tuple:
+    """The kernel records of ``estimators`` for the incidence wi of azimuth ``phi_i``, a tuple
+    parallel to their tallies' (:meth:`Estimator.setup`)."""
+    return tuple(estimator.setup(wi, phi_i) for estimator in estimators)
+
+
+def shadow_rays(estimators) -> int:
+    """Shadow rays ``estimators`` may queue per scattering event, together."""
+    return sum(estimator.shadow_rays() for estimator in estimators)
 
 
 def names_for(config) -> tuple[str, ...]:

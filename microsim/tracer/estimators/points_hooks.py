@@ -11,16 +11,15 @@ from microsim.tracer.integrators import walk
 
 
 @ON_INTERACTION.register(PointsTally)
-def on_interaction(record, tally, work, i, world, site, sensor):
-    """The event of path i sends a shadow ray towards every point: w e V into the row of the
-    order its interaction makes (module doc)."""
-    d, state = site
+def on_interaction(record, setup, tally, work, i, world, site):
+    """The event of path i sends a shadow ray towards every point (``setup``: their unit vectors
+    about the incidence): w e V into the row of the order its interaction makes (module doc)."""
+    points, (d, state) = setup, site
     paths = work.paths
     w, order = paths.weight[i], paths.order[i] + 1
     row = min(order, ORDERS) - 1
     wi = (-d[0], -d[1], -d[2])
     weight = record.weight[tally.row]
-    points = sensor.points
     for k in range(len(points)):
         wo = (points[k, 0], points[k, 1], points[k, 2])
         value = walk.evaluate(world, state, wi, wo)

@@ -41,14 +41,14 @@ def backend(scene, threads: int, estimators):
     return DirectBackend(scene, estimators, threads)
 
 
-def compile_kernels(beam, scene, sensor, estimators) -> None:
+def compile_kernels(beam, scene, setups, estimators) -> None:
     """Compile (or load) :func:`trace_chunks` for these types, tracing nothing: no Embree call,
     no device. The library is loaded first: the kernel's machine code links to rtcIntersect1 by
     name (without it, loading the code segfaults)."""
     embree.available()
     work = workspace(1, estimators, albedos=len(beam.albedo_scale))
     world = DirectWorld(scene.arrays(), embree.SceneHandle(0, np.zeros(1, np.int64), np.ones(2)))
-    trace_chunks(0, 0, 0, beam, world, sensor, work)
+    trace_chunks(0, 0, 0, beam, world, setups, work)
 
 
 class DirectBackend:
@@ -68,27 +68,27 @@ class DirectBackend:
         self.estimators, self.threads, self.log_rays = estimators, threads, log_rays
         self.ray_log = np.zeros((0, 7), np.float32)
 
-    def trace(self, beam, scene, sensor):
+    def trace(self, beam, scene, setups):
         work = workspace(wave_rows(beam.n_paths, self.threads), self.estimators, self.log_rays, len(beam.albedo_scale))
         world = DirectWorld(scene, self.embree.arrays())
         total = trace_in_waves(beam, self.estimators, self.threads, work,
-                               lambda *share: trace_chunks(*share, beam, world, sensor, work))
+                               lambda *share: trace_chunks(*share, beam, world, setups, work))
         self.ray_log = work.log[:min(work.logged[0], len(work.log))]
         return total
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def trace_chunks(first, start, stop, beam, world, sensor, work):
+def trace_chunks(first, start, stop, beam, world, setups, work):
     """Trace chunks first+start .. first+stop-1 of the beam to completion, chunk first+j into tally
     row j, its paths in path row j (see :func:`trace_chunk`)."""
     for j in range(start, stop):
         chunk = first + j
         trace_chunk(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths), SLOTS * j, beam, world,
-                    sensor, work, chunk_tally(work, j, beam))
+                    setups, work, chunk_tally(work, j, beam))
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def trace_chunk(begin, end, row, beam, world, sensor, work, tally):
+def trace_chunk(begin, end, row, beam, world, setups, work, tally):
     """Paths begin .. end-1, two at a time in rows ``row`` and ``row + 1``: both queries, then both
     events, so that the processor overlaps the two paths' event arithmetic (independent chains of
     divisions, square roots and random numbers); a slot whose path ends takes the next path.
@@ -110,19 +110,19 @@ def trace_chunk(begin, end, row, beam, world, sensor, work, tally):
             query(handle, work, b)
         tally.counts[SEGMENTS] += busy_a + busy_b
         if busy_a:
-            busy_a, number = event(work, a, (number, end), beam, world, sensor, tally)
+            busy_a, number = event(work, a, (number, end), beam, world, setups, tally)
         if busy_b:
-            busy_b, number = event(work, b, (number, end), beam, world, sensor, tally)
+            busy_b, number = event(work, b, (number, end), beam, world, setups, tally)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def event(work, row, waiting, beam, world, sensor, tally):
+def event(work, row, waiting, beam, world, setups, tally):
     """The path in ``row`` met the hit Embree left in its record: follow it, and prepare its next
     segment, or start path ``number`` of ``waiting`` = (number, end) in its row if it ended and
     paths are left. Returns (row busy, next path number)."""
     (number, end), (scene, handle) = waiting, world
     prim, t, normal = embree.hit_of(handle, work.queries, row)
-    alive, o, d = follow(work, row, (prim, np.float64(t), normal), world, sensor, beam.max_order, tally)
+    alive, o, d = follow(work, row, (prim, np.float64(t), normal), world, setups, beam.max_order, tally)
     if alive:
         prepare_segment(work.rays, row, o, d, scene)
         return True, number

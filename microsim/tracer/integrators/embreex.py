@@ -29,6 +29,7 @@ import numba
 import numpy as np
 
 from microsim.core.tally import SEGMENTS, empty_tally
+from microsim.tracer.estimators import shadow_rays
 from microsim.tracer.estimators.hooks import each_seen
 from microsim.tracer.integrators.events import MAX_IDLE_SEGMENTS, move_path
 from microsim.tracer.integrators.records import allocate_paths, allocate_rays
@@ -52,11 +53,11 @@ SHADOW_BYTES = 60
 PATH_ROW_BYTES = 80
 
 
-def batch_bytes(paths: int, points: int) -> int:
-    """Bytes the embreex backend works in for a unit of ``paths`` paths with ``points`` next-event
-    points: a batch of path rows and its shadow queue."""
-    rows = min(paths, BATCH_PATHS // max(points, 1))
-    return rows * (PATH_ROW_BYTES + points * SHADOW_BYTES)
+def batch_bytes(paths: int, shadow_rays: int) -> int:
+    """Bytes the embreex backend works in for a unit of ``paths`` paths whose estimators queue
+    ``shadow_rays`` shadow rays per event: a batch of path rows and its shadow queue."""
+    rows = min(paths, BATCH_PATHS // max(shadow_rays, 1))
+    return rows * (PATH_ROW_BYTES + shadow_rays * SHADOW_BYTES)
 
 
 class ShadowQueue(NamedTuple):
@@ -121,10 +122,10 @@ def backend(scene, threads: int, estimators):
     return EmbreexBackend(scene, estimators)
 
 
-def compile_kernels(beam, scene, sensor, estimators) -> None:
+def compile_kernels(beam, scene, setups, estimators) -> None:
     """Compile (or load) spawn_paths, advance and settle_shadows, with no embreex scene (nothing
     to hit)."""
-    EmbreexBackend(scene, estimators, embree=_NoHits()).trace(beam, scene.arrays(), sensor)
+    EmbreexBackend(scene, estimators, embree=_NoHits()).trace(beam, scene.arrays(), setups)
     settle_shadows(0, shadow_queue(0), _NoHits.run(np.zeros((0, 3)), None, None, query="OCCLUDED"), scene.arrays(),
                    empty_tally(0, estimators, beam.albedo_scale))
 
@@ -144,26 +145,26 @@ class EmbreexBackend:
         self.estimators = estimators
         self.paths, self.rays = allocate_paths(0), allocate_rays(0)
 
-    def trace(self, beam, scene, sensor):
-        points = len(sensor.points)
-        batch = BATCH_PATHS // max(points, 1)
+    def trace(self, beam, scene, setups):
+        rays = shadow_rays(self.estimators)
+        batch = BATCH_PATHS // max(rays, 1)
         rows = min(beam.n_paths, batch)
         if len(self.paths.weight) < rows:
             self.paths, self.rays = allocate_paths(rows), allocate_rays(rows)
-        world = EmbreexWorld(scene, shadow_queue(rows * points))
+        world = EmbreexWorld(scene, shadow_queue(rows * rays))
         tally = empty_tally(beam.n_paths, self.estimators, beam.albedo_scale)
         for first in range(0, beam.n_paths, batch):
-            self._trace_batch(first, min(batch, beam.n_paths - first), beam, world, sensor, tally)
+            self._trace_batch(first, min(batch, beam.n_paths - first), beam, world, setups, tally)
         return tally
 
-    def _trace_batch(self, first, n, beam, world, sensor, tally):
+    def _trace_batch(self, first, n, beam, world, setups, tally):
         """Paths first .. first+n-1 of the beam, added to ``tally``."""
         paths, rays, scene = self.paths, self.rays, world.scene
         spawn_paths(paths, rays, first, n, beam, scene)
         while n > 0:
             hit = self.embree.run(rays.origin[:n], rays.direction[:n], dists=rays.tfar[:n], output=1)
             tally.counts[SEGMENTS] += n
-            n = advance(n, paths, rays, (hit["primID"], hit["Ng"]), world, sensor, beam.max_order, tally)
+            n = advance(n, paths, rays, (hit["primID"], hit["Ng"]), world, setups, beam.max_order, tally)
             self._see_shadows(world, tally)
 
     def _see_shadows(self, world, tally):
@@ -238,7 +239,7 @@ def settle_shadows(m, shadows, blocked, scene, tally):
 
 
 @numba.njit(cache=True, error_model="numpy", _nrt=False)
-def advance(n, paths, rays, hits, world, sensor, max_order, tally):
+def advance(n, paths, rays, hits, world, setups, max_order, tally):
     """Take every live ray through the segment Embree traced; compact survivors; return their count.
 
     ``hits`` = (primitive, normal) arrays from embreex; ``world`` the scene's arrays and the
@@ -251,7 +252,7 @@ def advance(n, paths, rays, hits, world, sensor, max_order, tally):
     lanes = Lanes(paths, rays)
     for i in range(n):
         hit = (prim[i], np.float64(rays.tfar[i]), (normal[i, 0], normal[i, 1], normal[i, 2]))
-        keep, o, d = follow(lanes, i, hit, world, sensor, max_order, tally)
+        keep, o, d = follow(lanes, i, hit, world, setups, max_order, tally)
         if keep:
             move_path(paths, live, i)
             prepare_segment(rays, live, o, d, scene)

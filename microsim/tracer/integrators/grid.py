@@ -65,11 +65,11 @@ def backend(scene, threads: int, estimators):
     return GridBackend(scene, estimators, threads)
 
 
-def compile_kernels(beam, scene, sensor, estimators) -> None:
+def compile_kernels(beam, scene, setups, estimators) -> None:
     """Compile (or load) :func:`trace_chunks` for these types, tracing nothing."""
     work = workspace(1, estimators, albedos=len(beam.albedo_scale))
     world = GridWorld(scene.arrays(), HeightGrid.of(np.zeros((2, 2)), 1.0, 0))
-    trace_chunks(0, 0, 0, beam, world, sensor, work)
+    trace_chunks(0, 0, 0, beam, world, setups, work)
 
 
 class GridBackend:
@@ -82,15 +82,15 @@ class GridBackend:
             raise ValueError("the grid backend traces heightfields with intersector = 'grid' only")
         self.grid, self.estimators, self.threads = scene.grid, estimators, threads
 
-    def trace(self, beam, scene, sensor):
+    def trace(self, beam, scene, setups):
         work = workspace(wave_rows(beam.n_paths, self.threads), self.estimators, 0, len(beam.albedo_scale))
         world = GridWorld(scene, self.grid)
         return trace_in_waves(beam, self.estimators, self.threads, work,
-                              lambda *share: trace_chunks(*share, beam, world, sensor, work))
+                              lambda *share: trace_chunks(*share, beam, world, setups, work))
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def trace_chunks(first, start, stop, beam, world, sensor, work):
+def trace_chunks(first, start, stop, beam, world, setups, work):
     """Trace chunks first+start .. first+stop-1 of the beam to completion, chunk first+j into tally
     row j, its paths one after the other in path row SLOTS j."""
     scene = world.scene
@@ -103,7 +103,7 @@ def trace_chunks(first, start, stop, beam, world, sensor, work):
             while alive:
                 tally.counts[SEGMENTS] += 1
                 hit = segment_hit(world, work.rays, row)
-                alive, o, d = follow(work, row, hit, world, sensor, beam.max_order, tally)
+                alive, o, d = follow(work, row, hit, world, setups, beam.max_order, tally)
                 if alive:
                     prepare_segment(work.rays, row, o, d, scene)
 

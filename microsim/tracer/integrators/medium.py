@@ -22,7 +22,7 @@ from microsim.core.tally import SEGMENTS, SINGLE_ALBEDO
 from microsim.physics.phase import phase_value, sample_cosine
 from microsim.physics.rng import uniform
 from microsim.physics.sampling import from_local
-from microsim.tracer.estimators import DEFAULT, build
+from microsim.tracer.estimators import DEFAULT, build, setups
 from microsim.tracer.integrators.events import begin_path
 from microsim.tracer.integrators.records import Beam
 from microsim.tracer.integrators.scheduler import trace_in_waves, wave_bytes, wave_rows, workspace
@@ -46,7 +46,7 @@ class MediumTracer:
     COMPILE_SECONDS = {"direct": 3, "embreex": 3}
 
     @staticmethod
-    def working_bytes(backend: str, threads: int, paths: int, tally_bytes: int, points: int) -> int:
+    def working_bytes(backend: str, threads: int, paths: int, tally_bytes: int, shadow_rays: int) -> int:
         """Bytes it works in while it traces a unit of ``paths`` paths (for the memory estimate)."""
         return wave_bytes(threads, tally_bytes)
 
@@ -58,26 +58,27 @@ class MediumTracer:
         """Trace ``n_paths`` paths arriving along -``wi`` on the random stream ``key``; see
         :meth:`microsim.tracer.integrators.surface.SurfaceTracer.trace`."""
         beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order, np.asarray(albedo_scale, np.float64))
-        medium, sensor = self.scene.medium, self.sensor.toward(beam.wi, phi_i)
+        medium, kernel_setups = self.scene.medium, setups(self.estimators, beam.wi, phi_i)
         work = workspace(wave_rows(n_paths, self.threads), self.estimators, albedos=len(beam.albedo_scale))
         return trace_in_waves(beam, self.estimators, self.threads, work,
-                              lambda *share: trace_medium_chunks(*share, beam, medium, sensor, work))
+                              lambda *share: trace_medium_chunks(*share, beam, medium, kernel_setups, work))
 
     @classmethod
     def compile(cls, sensor, estimators=None, albedos: int = 1, scene=None, backend: str = "direct",
                 threads: int = 1) -> None:
         """Compile (or load) the kernel before workers fork, for runs of ``albedos`` albedos,
         tracing nothing."""
-        work = workspace(1, build(DEFAULT, sensor) if estimators is None else estimators, albedos=albedos)
+        estimators = build(DEFAULT, sensor) if estimators is None else estimators
+        work = workspace(1, estimators, albedos=albedos)
         beam = Beam(np.array([0.0, 0.0, 1.0]), np.uint64(0), 0, 0, np.ones(albedos))
-        trace_medium_chunks(0, 0, 0, beam, Medium(0, 0.5), sensor, work)
+        trace_medium_chunks(0, 0, 0, beam, Medium(0, 0.5), setups(estimators, beam.wi, 0.0), work)
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def trace_medium_chunks(first, start, stop, beam, world, sensor, work):
+def trace_medium_chunks(first, start, stop, beam, world, setups, work):
     """Chunks first+start .. first+stop-1 of the beam, chunk first+j into tally row j, by the walk
     (:func:`microsim.tracer.integrators.walk.trace_chunks`)."""
-    trace_chunks((first, start, stop), beam, world, sensor, work, enter_medium, free_flight, scatter_in_medium)
+    trace_chunks((first, start, stop), beam, world, setups, work, enter_medium, free_flight, scatter_in_medium)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

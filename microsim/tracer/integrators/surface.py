@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from microsim.core.tally import SINGLE_ALBEDO
-from microsim.tracer.estimators import DEFAULT, build
+from microsim.tracer.estimators import DEFAULT, build, setups
 from microsim.tracer.integrators import direct, embreex, grid
 from microsim.tracer.integrators.records import Beam
 from microsim.tracer.integrators.scheduler import wave_bytes
@@ -20,7 +20,7 @@ from microsim.tracer.materials import Absorber
 from microsim.tracer.scene import Scene, SceneBuilder
 
 #: ``run.backend`` -> the module of that backend (as microsim.core.choices.BACKENDS names them): ``backend(scene, threads, estimators)`` and
-#: ``compile_kernels(beam, scene, sensor, estimators)``
+#: ``compile_kernels(beam, scene, setups, estimators)``
 BACKENDS = {"direct": direct, "embreex": embreex}
 
 
@@ -41,19 +41,19 @@ class SurfaceTracer:
     COMPILE_SECONDS = {"direct": 20, "embreex": 7}
 
     @staticmethod
-    def working_bytes(backend: str, threads: int, paths: int, tally_bytes: int, points: int) -> int:
+    def working_bytes(backend: str, threads: int, paths: int, tally_bytes: int, shadow_rays: int) -> int:
         """Bytes it works in while it traces a unit of ``paths`` paths (for the memory estimate):
         the embreex backend's batch of path rows and shadow queue, or a wave's chunk tallies."""
         if backend == "embreex":
-            return embreex.batch_bytes(paths, points)
+            return embreex.batch_bytes(paths, shadow_rays)
         return wave_bytes(threads, tally_bytes)
 
     def __init__(self, scene: Scene, sensor, backend: str = "direct", threads: int = 1, estimators=None):
         self.scene, self.sensor = scene, sensor
         self.arrays = scene.arrays()
-        estimators = build(DEFAULT, sensor) if estimators is None else estimators
+        self.estimators = build(DEFAULT, sensor) if estimators is None else estimators
         module = grid if scene.grid is not None else backend_module(backend)
-        self.backend = module.backend(scene, threads, estimators)
+        self.backend = module.backend(scene, threads, self.estimators)
 
     def trace(self, wi, n_paths: int, key, max_order: int, albedo_scale=SINGLE_ALBEDO, phi_i=None):
         """Trace ``n_paths`` paths arriving along -``wi``; return their :class:`~microsim.core.tally.Tally`.
@@ -61,12 +61,12 @@ class SurfaceTracer:
         ``key`` selects the random stream (see :mod:`microsim.physics.rng`); ``max_order`` = 0 means
         unlimited, k > 0 truncates a path at its (k+1)-th interaction; ``albedo_scale`` holds
         c_j / c_max for a run of several albedos (:class:`~microsim.core.tally.Tally`); ``phi_i``, the
-        incidence's azimuth, turns the sensor's points where wi is the normal
-        (:meth:`microsim.tracer.sensor.Sensor.toward`).
+        incidence's azimuth, sets the plane of incidence where wi is the normal (for the
+        estimators' setups, :func:`microsim.tracer.estimators.setups`).
         """
         beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order,
                     np.asarray(albedo_scale, np.float64))
-        return self.backend.trace(beam, self.arrays, self.sensor.toward(beam.wi, phi_i))
+        return self.backend.trace(beam, self.arrays, setups(self.estimators, beam.wi, phi_i))
 
     @classmethod
     def compile(cls, sensor, estimators=None, albedos: int = 1, scene=None, backend: str = "direct",
@@ -85,7 +85,7 @@ class SurfaceTracer:
         beam = Beam(np.array([0.0, 0.0, 1.0]), np.uint64(0), 1, 0, np.ones(albedos))
         estimators = build(DEFAULT, sensor) if estimators is None else estimators
         module = grid if scene is not None and scene.get("intersector") == "grid" else backend_module(backend)
-        module.compile_kernels(beam, builder.build(1.0, -1.0, {}), sensor, estimators)
+        module.compile_kernels(beam, builder.build(1.0, -1.0, {}), setups(estimators, beam.wi, 0.0), estimators)
 
 
 def backend_module(name: str):

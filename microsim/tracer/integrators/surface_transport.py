@@ -69,7 +69,7 @@ def start_path(paths, rays, i, number, beam, scene):
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def follow(work, i, hit, world, sensor, max_order, tally):
+def follow(work, i, hit, world, setups, max_order, tally):
     """Path i traced the segment in row i of ``work.rays`` and met ``hit`` = (primitive or -1, its
     distance t, Embree's float32 geometric normal); take it through the event there
     (:func:`microsim.tracer.integrators.walk.take_event`). ``world``: a backend's world, whose ``scene``
@@ -102,7 +102,7 @@ def follow(work, i, hit, world, sensor, max_order, tally):
             kind = TRANSMISSION
         else:
             state = (wrap_side(o, d, t, end, scene.period), state[1], -1)
-    alive, d, state = take_event(world, work, i, (kind, d, state), max_order, sensor, tally, interact_on_shape)
+    alive, d, state = take_event(world, work, i, (kind, d, state), max_order, setups, tally, interact_on_shape)
     return alive, state[0], d
 
 

@@ -41,7 +41,7 @@ from microsim.core.tally import SEGMENTS, SINGLE_ALBEDO
 from microsim.physics.distributions import sample_slope
 from microsim.physics.rng import uniform
 from microsim.tracer import embree
-from microsim.tracer.estimators import DEFAULT, build
+from microsim.tracer.estimators import DEFAULT, build, setups
 from microsim.tracer.integrators.events import begin_path
 from microsim.tracer.integrators.records import Beam
 from microsim.tracer.integrators.scheduler import trace_in_waves, wave_bytes, wave_rows, workspace
@@ -100,7 +100,7 @@ class VCavityTracer:
     COMPILE_SECONDS = {"direct": 5, "embreex": 5}
 
     @staticmethod
-    def working_bytes(backend: str, threads: int, paths: int, tally_bytes: int, points: int) -> int:
+    def working_bytes(backend: str, threads: int, paths: int, tally_bytes: int, shadow_rays: int) -> int:
         """Bytes it works in while it traces a unit of ``paths`` paths (for the memory estimate)."""
         return wave_bytes(threads, tally_bytes)
 
@@ -116,12 +116,12 @@ class VCavityTracer:
         """Trace ``n_paths`` paths arriving along -``wi`` on the random stream ``key``; see
         :meth:`microsim.tracer.integrators.surface.SurfaceTracer.trace`."""
         beam = Beam(np.asarray(wi, np.float64), np.uint64(key), n_paths, max_order, np.asarray(albedo_scale, np.float64))
-        grooves, sensor = self.scene.grooves, self.sensor.toward(beam.wi, phi_i)
+        grooves, kernel_setups = self.scene.grooves, setups(self.estimators, beam.wi, phi_i)
         work = workspace(wave_rows(n_paths, self.threads), self.estimators, self.log_rays, len(beam.albedo_scale))
         world = GrooveWorld(grooves) if self.embree is None else EmbreeGrooveWorld(grooves, self.embree.arrays())
         trace_share = trace_chunks_analytic if self.embree is None else trace_chunks_embree
         total = trace_in_waves(beam, self.estimators, self.threads, work,
-                               lambda *share: trace_share(*share, beam, world, sensor, work))
+                               lambda *share: trace_share(*share, beam, world, kernel_setups, work))
         self.ray_log = work.log[:min(work.logged[0], len(work.log))]
         return total
 
@@ -134,31 +134,32 @@ class VCavityTracer:
         name)."""
         beam = Beam(np.array([0.0, 0.0, 1.0]), np.uint64(0), 0, 0, np.ones(albedos))
         grooves = Grooves(0, 0.5, 0.5, 0, np.zeros(2))
-        work = workspace(1, build(DEFAULT, sensor) if estimators is None else estimators, albedos=albedos)
+        estimators = build(DEFAULT, sensor) if estimators is None else estimators
+        work = workspace(1, estimators, albedos=albedos)
         intersector = None if scene is None else scene.get("intersector")
         if intersector in (None, "analytic"):
-            trace_chunks_analytic(0, 0, 0, beam, GrooveWorld(grooves), sensor, work)
+            trace_chunks_analytic(0, 0, 0, beam, GrooveWorld(grooves), setups(estimators, beam.wi, 0.0), work)
         if intersector in (None, "embree"):
             try:
                 embree.available()
             except embree.EmbreeUnavailable:
                 return
             handle = embree.SceneHandle(0, np.zeros(1, np.int64), np.ones(2))
-            trace_chunks_embree(0, 0, 0, beam, EmbreeGrooveWorld(grooves, handle), sensor, work)
+            trace_chunks_embree(0, 0, 0, beam, EmbreeGrooveWorld(grooves, handle), setups(estimators, beam.wi, 0.0), work)
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def trace_chunks_analytic(first, start, stop, beam, world, sensor, work):
+def trace_chunks_analytic(first, start, stop, beam, world, setups, work):
     """Chunks first+start .. first+stop-1 of the beam, chunk first+j into tally row j, by the walk
     (:func:`microsim.tracer.integrators.walk.trace_chunks`) with :func:`meet_analytic`."""
-    trace_chunks((first, start, stop), beam, world, sensor, work, start_in_groove, next_event_analytic,
+    trace_chunks((first, start, stop), beam, world, setups, work, start_in_groove, next_event_analytic,
                  interact_on_facet)
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def trace_chunks_embree(first, start, stop, beam, world, sensor, work):
+def trace_chunks_embree(first, start, stop, beam, world, setups, work):
     """:func:`trace_chunks_analytic` with :func:`meet_embree`."""
-    trace_chunks((first, start, stop), beam, world, sensor, work, start_in_groove, next_event_embree,
+    trace_chunks((first, start, stop), beam, world, setups, work, start_in_groove, next_event_embree,
                  interact_on_facet)
 
 

@@ -102,14 +102,14 @@ EVALUATE = Generic(evaluate)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def take_event(world, work, i, event, max_order, sensor, tally, interact):
+def take_event(world, work, i, event, max_order, setups, tally, interact):
     """Row i of ``work`` met ``event`` = (kind, d, state): take it through it (module doc);
     ``interact`` is the transport's (any kind not named is an interaction). Returns (alive, d,
     state) of the path after it."""
     kind, d, state = event
     paths = work.paths
     if kind == EXIT:
-        each_exit(tally.estimates, tally, paths, i, d, sensor)
+        each_exit(tally.estimates, setups, tally, paths, i, d)
         return False, d, state
     if kind == TRANSMISSION:
         add_lost(tally, TRANSMITTED, paths.weight[i], paths.order[i])
@@ -121,13 +121,13 @@ def take_event(world, work, i, event, max_order, sensor, tally, interact):
         return not idled(paths, i, tally), d, state
     if cut_at_max_order(paths, i, max_order, tally):
         return False, d, state
-    each_interaction(tally.estimates, tally, work, i, world, (d, state), sensor)
+    each_interaction(tally.estimates, setups, tally, work, i, world, (d, state))
     wo, factor, cut, leaving = interact(world, paths, i, (d, state))
     return interacted(paths, i, factor, cut, tally), wo, leaving
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def walk(row, beam, world, sensor, tally, start, next_event, interact):
+def walk(row, beam, world, setups, tally, start, next_event, interact):
     """Path ``number`` of the beam, in row i of ``work`` (``row`` = (work, i, number)), from its
     start until it leaves, is absorbed or is truncated, by the transport (start, next_event,
     interact)."""
@@ -135,14 +135,14 @@ def walk(row, beam, world, sensor, tally, start, next_event, interact):
     path = start(world, work, i, number, beam)
     while True:
         event = next_event(world, work, i, path, tally)
-        alive, d, state = take_event(world, work, i, event, beam.max_order, sensor, tally, interact)
+        alive, d, state = take_event(world, work, i, event, beam.max_order, setups, tally, interact)
         if not alive:
             return
         path = (d, state)
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def trace_chunks(share, beam, world, sensor, work, start, next_event, interact):
+def trace_chunks(share, beam, world, setups, work, start, next_event, interact):
     """Chunks first+a .. first+b-1 of the beam (``share`` = (first, a, b)), chunk first+j into tally
     row j, its paths one after the other in path row j (:func:`walk`)."""
     first, a, b = share
@@ -150,4 +150,4 @@ def trace_chunks(share, beam, world, sensor, work, start, next_event, interact):
         tally = chunk_tally(work, j, beam)
         chunk = first + j
         for number in range(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths)):
-            walk((work, j, number), beam, world, sensor, tally, start, next_event, interact)
+            walk((work, j, number), beam, world, setups, tally, start, next_event, interact)

@@ -53,15 +53,18 @@ class Generic:
         return add
 
 
-def over_each(stub, one) -> None:
+def over_each(stub, one, parallel: int = 1) -> None:
     """Make numba compile ``stub(records, ...)`` (a Python function's signature) as ``one(record,
     ...)`` for every record of the tuple ``records`` in turn (``one``: a generic function's stub),
-    unrolled when the kernel compiles."""
+    unrolled when the kernel compiles; with ``parallel`` = 2, the second argument is a tuple as
+    long, whose item goes with its record: ``one(records[k], setups[k], ...)``."""
     names = list(inspect.signature(stub).parameters)
-    arguments, rest = ", ".join(names), ", ".join(names[1:])
+    tuples, rest = names[:parallel], ", ".join(names[parallel:])
+    arguments = ", ".join(names)
+    firsts, tails = ", ".join(f"{t}[0]" for t in tuples), ", ".join(f"{t}[1:]" for t in tuples)
     namespace = {"one": one, "every": stub}
     exec(f"def nothing({arguments}):\n    return None\n"
-         f"def each({arguments}):\n    one({names[0]}[0], {rest})\n    every({names[0]}[1:], {rest})\n", namespace)
+         f"def each({arguments}):\n    one({firsts}, {rest})\n    every({tails}, {rest})\n", namespace)
 
     @functools.wraps(stub)
     def select(*args):
