@@ -48,7 +48,8 @@ def table_format_page() -> str:
               "|---|---|---|---|---|---|"]
     for d in tables.DATASETS:
         axes = "(" + ", ".join(d.axes) + ")" if d.axes is not None else "free"
-        lines.append(f"| `{d.name}` | {axes} | {d.unit or '-'} | {_cell(d.doc)} | {_cell(d.when)} | "
+        when = d.when if d.since == "1.0" else f"{d.when}; format {d.since} on"
+        lines.append(f"| `{d.name}` | {axes} | {d.unit or '-'} | {_cell(d.doc)} | {_cell(when)} | "
                      f"{'yes' if d.required else ''} |")
     return "\n".join(lines)
 

@@ -160,9 +160,10 @@ def correlated_config(seed: int = 3, paths: int = 16_000, realizations: int = 16
     return cfg
 
 
-def without_covariance(path, out):
-    """A copy of the table at ``path`` without the points' covariance, as tables written before
-    it existed (the loader checks each dataset's SHA-256: whole datasets can go)."""
+def without_covariance(path, out, version="1.0"):
+    """A copy of the table at ``path`` without the points' covariance, as tables of format 1.0
+    (``version``) may be, written before it existed (the loader checks each dataset's SHA-256:
+    whole datasets can go)."""
     import shutil
 
     import h5py
@@ -170,6 +171,7 @@ def without_covariance(path, out):
     shutil.copy(path, out)
     with h5py.File(out, "a") as f:
         del f["brdf_points_covariance"], f["brdf_points_order_covariance"]
+        f.attrs["format_version"] = version
     return out
 
 
@@ -203,6 +205,16 @@ def test_hotelling_judges_the_points_where_the_table_holds_their_covariance(corr
     assert overall["bonferroni_level"] == pytest.approx(CHI2_OUTSIDE / 2)
     assert overall["p_value_min"] == pytest.approx(min(row["p_value"] for row in result["per_incidence"]))
     assert overall["consistent"] and overall["incidences_chi2_1dof"] == 0
+
+
+def test_a_table_of_format_1_1_without_the_points_covariance_is_refused_as_damaged(correlated, tmp_path, capsys):
+    """Tables of format 1.1 hold the covariance with their points (its ``since``): one without it
+    is refused in one line as damaged, where one of format 1.0 is judged by the bounds of one
+    degree of freedom (the next test)."""
+    damaged = without_covariance(correlated[0], tmp_path / "damaged.h5", version="1.1")
+    for command, free in (("compare", []), ("fit", ["--free", "albedo"])):
+        assert_refused([command, str(damaged), "--model", "lambert", "--param", "albedo=0.5", *free, "--points"],
+                       capsys, "brdf_points_covariance", "format 1.1", "damaged")
 
 
 def test_hotelling_rejects_an_albedo_half_a_percent_off_that_one_degree_of_freedom_does_not(correlated, capsys):

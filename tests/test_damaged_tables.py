@@ -18,18 +18,21 @@ from microsim.testing.refusals import assert_refused
 COMPARE = ["--model", "lambert", "--param", "albedo=0.5", "--order", "1"]
 
 
-@pytest.fixture(scope="module")
-def good_table(tmp_path_factory):
-    """A Lambertian plane, 2 incidences x 20 cells: small, but a real table."""
+def plane_table(directory, **sensor):
+    """A Lambertian plane, 2 incidences x 20 cells and ``sensor``'s keys: small, but a real table."""
     cfg = config.validate({
         "scene": {"kind": "plane"},
         "material": {"kind": "lambert", "albedo": 0.5},
         "illumination": {"theta_i_deg": [0.0, 60.0]},
-        "sensor": {"cells": 20},
+        "sensor": {"cells": 20, **sensor},
         "run": {"paths": 2000, "realizations": 2, "seed": 1},
     })
-    path = tmp_path_factory.mktemp("good") / "plane.h5"
-    return write_table(cfg, path)
+    return write_table(cfg, directory / "plane.h5")
+
+
+@pytest.fixture(scope="module")
+def good_table(tmp_path_factory):
+    return plane_table(tmp_path_factory.mktemp("good"))
 
 
 def damaged_copy(good_table, directory, damage):
@@ -101,6 +104,33 @@ def test_a_damaged_table_gives_one_line_naming_the_dataset(good_table, tmp_path,
     cells = tables.load(good_table).sensor.n_cells
     path = damaged_copy(good_table, tmp_path, damage)
     assert expected.format(cells=cells, values=2 * cells) in compare_error(path, capsys)
+
+
+@pytest.fixture(scope="module")
+def points_table(tmp_path_factory):
+    """The good table's plane with three next-event points."""
+    return plane_table(tmp_path_factory.mktemp("points"), directions_deg=[[0, 0], [30, 45], [60, 180]])
+
+
+def replace(name, shape):
+    """A damage that stores dataset ``name`` with the wrong ``shape``."""
+    def damage(h5):
+        del h5[name]
+        h5[name] = np.zeros(shape)
+    return damage
+
+
+@pytest.mark.parametrize("damage, expected", [
+    (replace("brdf_points", (2, 4)), "brdf_points has shape (2, 4), expected (2, 3) (incidences x points)"),
+    (replace("brdf_points_covariance", (2, 3, 2)),
+     "brdf_points_covariance has shape (2, 3, 2), expected (2, 3, 3) (incidences x points x other_points)"),
+    (replace("other_points", (2,)), "other_points has shape (2,), expected (3,) (other_points)"),
+], ids=["a point too many", "a covariance short of a point", "a covariance's second axis short of a point"])
+def test_an_estimator_s_axis_has_one_length_in_a_table(points_table, tmp_path, capsys, damage, expected):
+    """The points' axis is as long as the points the table's sensor/points_kind holds, in every
+    dataset that has it, the covariance's second axis too."""
+    path = damaged_copy(points_table, tmp_path, damage)
+    assert expected in compare_error(path, capsys)
 
 
 def brdf_chunk(good_table):

@@ -26,7 +26,7 @@ as many points with spread as realizations or more has no test (C has rank R - 1
 takes the bounds below instead, at the same level. Hotelling's test sees a model off by less
 than chi-square per point can (its power: docs/validation/statistics.md, 'Points').
 
-A table without the covariance (written before it existed) keeps the bounds of chi-square of
+A table of format 1.0 without the covariance (written before it existed) keeps the bounds of chi-square of
 one degree of freedom, every point's error one common error (``chi2_bounds`` with realizations'
 share 1): for normal errors, whatever their correlation, the mean of the squares exceeds the
 upper one with probability at most CHI2_OUTSIDE / 2 (Szekely and Bakirov 2003). A model off by
@@ -59,7 +59,7 @@ gives errors as calibrated as a normal simulation's (figures: docs/validation/st
 sum k less the free parameters; each T^2 has mean k (R - 1) / (R - k - 2) for an exact model,
 so chi-square per degree of freedom near (R - 1) / (R - k - 2) is a good fit (1.9 at R = 16, k =
 6). An incidence with as many points with spread as realizations or more (C of rank R - 1 at
-most), or too many for c > 0, and a table without the covariance (written before it existed),
+most), or too many for c > 0, and a table of format 1.0 without the covariance (written before it existed),
 take the bounding fit instead: each point weighed by its own standard error, and a parameter's
 standard error the bound that holds whatever the points' correlation, sum_j |a_j| s_j for the
 parameter's row a of the least-squares solution and the points' errors s (for independent points
@@ -78,7 +78,7 @@ import numpy as np
 from microsim.analysis.fitted import Fitted
 from microsim.analysis.judges import Judge
 from microsim.analysis.point_comparison import EXACT_POINT, PointComparison, judged_values
-from microsim.analysis.selection import ORDER_ROWS, extra_selection, require_finite
+from microsim.analysis.selection import ORDER_ROWS, extra_selection, predates, require_finite
 from microsim.core import table_noise
 from microsim.core.table_noise import CHI2_OUTSIDE, chi2_1dof_p, hotelling, normal_squares, realizations
 
@@ -234,12 +234,16 @@ def compare_points(table, model, order: str = "all", **params) -> PointCompariso
 
 def points_covariance(table, order: str) -> np.ndarray | None:
     """(n_i, n_d, n_d) the covariance of the mean of the table's points of ``order`` (checked
-    by :func:`microsim.analysis.selection.extra_selection`), brdf_points_covariance or a row of brdf_points_order_covariance;
-    None for a table without it (written before it existed). ValueError (one line) if not finite."""
+    by :func:`microsim.analysis.selection.extra_selection`), brdf_points_covariance or a row of
+    brdf_points_order_covariance; None for a table of a format before it existed. ValueError
+    (one line) if not finite, or missing from a table of a format that holds it."""
     row = ORDER_ROWS[order]
     name = "brdf_points_covariance" if row is None else "brdf_points_order_covariance"
     if name not in table.arrays:
-        return None
+        if predates(table, name):
+            return None
+        raise ValueError(f"--points: table {table.path} has no {name}, which a table of format "
+                         f"{table.format_version} holds with its points: it is damaged")
     covariance = table.arrays[name] if row is None else table.arrays[name][:, row]
     require_finite(covariance, f"table {table.path}: {name} (order {order})", "entries")
     return covariance

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from microsim.core.table_layout import may_lack
+
 SIGNAL_TO_NOISE = 3.0
 #: --order choice -> row of the table's brdf_order (None: all orders, the table's brdf; BASE: the
 #: part of order 1 scattered by the base, brdf_order1_base, in tables of scenes with a base)
@@ -39,11 +41,11 @@ def selection(table, order: str):
         raise ValueError(f"order {order!r}; accepted: {', '.join(ORDER_ROWS)}")
     row = ORDER_ROWS[order]
     if row == BASE and not {"brdf_order1_base", "albedo_order1_base"} <= table.arrays.keys():
-        raise ValueError(f"--order 1-base: table {table.path} has no brdf_order1_base and albedo_order1_base "
-                         "(its scene has no base, or it was written before they existed)")
+        why = predates(table, "brdf_order1_base") or "its scene has no base"
+        raise ValueError(f"--order 1-base: table {table.path} has no brdf_order1_base and albedo_order1_base ({why})")
     if row == ORDERS12 and not {"brdf_orders12", "albedo_orders12"} <= table.arrays.keys():
-        raise ValueError(f"--order 1+2: table {table.path} has no brdf_orders12 and albedo_orders12 "
-                         "(it was written before they existed)")
+        why = predates(table, "brdf_orders12") or f"a table of format {table.format_version} holds them: it is damaged"
+        raise ValueError(f"--order 1+2: table {table.path} has no brdf_orders12 and albedo_orders12 ({why})")
     selected = selected_rows(table, row)
     for name, values in zip(selected[0], selected[1:3]):
         require_finite(values, f"table {table.path}: {name} (order {order})")
@@ -68,13 +70,25 @@ def extra_selection(table, order: str, judge):
     dataset = name if row is None else f"{name}_order"
     missing = [k for k in (dataset, f"{dataset}_stderr", *judge.geometry) if k not in table.arrays]
     if missing:
-        raise ValueError(f"--{on}: table {table.path} has no {', '.join(missing)} (its config has no {judge.keys}, "
-                         "or it was written before they existed)")
+        why = next(filter(None, (predates(table, k) for k in missing)), f"its config has no {judge.keys}")
+        raise ValueError(f"--{on}: table {table.path} has no {', '.join(missing)} ({why})")
     names = (dataset, f"{dataset}_stderr")
     values, stderr = (table.arrays[k] if row is None else table.arrays[k][:, row] for k in names)
     for k, v in zip(names, (values, stderr)):
         require_finite(v, f"table {table.path}: {k} (order {order})", judge.unit + "s")
     return values, stderr
+
+
+def predates(table, name: str) -> str:
+    """Why the table lacks dataset ``name`` if its format predates it ("written in format 1.0,
+    before it existed"), else "" (the table of its format holds it where its ``when`` holds:
+    :func:`microsim.core.table_layout.may_lack`)."""
+    from microsim.tables import DECLARED  # the estimators' declarations: not for the CLI's help
+
+    declared = DECLARED.get(name)
+    if declared is None or not may_lack(table.format_version, declared):
+        return ""
+    return f"written in format {table.format_version}, before it existed"
 
 
 def selected_rows(table, row):

@@ -5,8 +5,11 @@ The core datasets (incidences, sensor, energy, paths, diagnostics) are declared 
 estimator declares its own (``Estimator.DATASETS``, :mod:`microsim.tracer.estimators`): the loader's
 shape checks and the reference page of the documentation derive from the two together
 (:data:`microsim.tables.DATASETS`). A leaf module: it imports only the tally's names. ``FORMAT_VERSION`` is
-written into every table; it changes when a dataset changes meaning or shape (adding one does
-not).
+written into every table; its major number changes when a dataset changes meaning or shape, its
+minor number when datasets or attributes are added. A dataset's ``since`` is the first version
+whose tables hold it wherever its ``when`` holds: a table of an earlier version may lack it
+(:func:`may_lack`), and a reader keys what it does without the dataset on that, not on its
+absence alone (a table of a later version that lacks it is damaged).
 """
 
 from __future__ import annotations
@@ -32,6 +35,18 @@ class Dataset:
     doc: str
     when: str = "always"
     required: bool = False
+    since: str = "1.0"
+
+
+def version_numbers(version: str) -> tuple[int, ...]:
+    """A format version as numbers: "1.1" -> (1, 1)."""
+    return tuple(int(part) for part in str(version).split("."))
+
+
+def may_lack(table_version: str, dataset: Dataset) -> bool:
+    """Whether a table of ``table_version`` may lack ``dataset`` where its ``when`` holds: it was
+    written before the dataset's ``since``."""
+    return version_numbers(table_version) < version_numbers(dataset.since)
 
 
 @dataclass(frozen=True)
@@ -58,6 +73,9 @@ AXIS_LENGTHS = {
     "realizations": "the realizations (the attribute realizations)",
     "masking_directions": "the directions of the scene's attribute statistics_directions_deg",
 }
+
+#: axes whose length is another's: a covariance's second axis (the loader checks it)
+SAME_LENGTH = {"other_points": "points"}
 
 #: what the dimension scale of each axis holds (its netCDF coordinate variable, format 1.1):
 #: the index along it, but for the orders

@@ -49,6 +49,11 @@ class Table:
         """Incidence directions (n_i, 3)."""
         return direction(self.theta_i, self.phi_i)
 
+    @property
+    def format_version(self) -> str:
+        """The layout's version the table was written in (1.0 for a table without the attribute)."""
+        return str(self.attrs.get("format_version", "1.0"))
+
 
 class TableError(ValueError):
     """A damaged, incomplete or inconsistent table; the message is one line naming the dataset."""
@@ -72,7 +77,7 @@ def load(path: str | Path) -> Table:
             raise TableError(f"HDF5 structure is damaged ({err})") from None
     if "microsim_version" not in attrs or "config_toml" not in attrs:
         raise TableError("not a microsim table (no microsim_version and config_toml attributes)")
-    version = str(attrs.get("format_version", "1.0"))
+    version = str(attrs.get("format_version", "1.0"))  # Table.format_version
     if version.split(".")[0] != table_layout.FORMAT_VERSION.split(".")[0]:
         raise TableError(f"format_version {version}: this microsim reads tables of format "
                          f"{table_layout.FORMAT_VERSION.split('.')[0]}.x")
@@ -126,17 +131,16 @@ def _check(arrays: dict, realizations) -> None:
         raise TableError(f"sensor/ring_counts holds {counts.tolist()}, expected cell counts >= 1, one per ring")
     if theta.ndim != 1:
         raise TableError(f"incidence/theta has shape {theta.shape}, expected (incidences,)")
-    rings = arrays["sensor/retro_gamma_lo"].size if "sensor/retro_gamma_lo" in arrays else 0
-    points = arrays["sensor/points_kind"].size if "sensor/points_kind" in arrays else 0
-    sizes = {"incidences": theta.size, "cells": int(counts.sum()), "orders": ORDERS, "xyz": 3, "retro_rings": rings,
-             "points": points, "other_points": points, "rings": counts.size, "bounds": 2, "realizations": realizations}
-    for name, axes in AXES.items():
-        if name not in arrays:
-            continue
+    sizes = {"incidences": theta.size, "cells": int(counts.sum()), "orders": ORDERS, "xyz": 3, "rings": counts.size,
+             "bounds": 2, "realizations": realizations}
+    declared = [(name, AXES[name]) for name in AXES if name in arrays]
+    for name, axes in sorted(declared, key=lambda item: len(item[1])):  # an axis's own datasets first
         shape = arrays[name].shape
-        expected = tuple(sizes.get(axis, n) for axis, n in zip(axes, shape))  # masking directions: free
-        if len(shape) != len(axes) or shape != expected:
-            shown = tuple(sizes.get(axis, "any") for axis in axes)
+        for axis, n in zip(axes, shape):  # an estimator's axis (its points, its rings): the first that has it
+            sizes.setdefault(table_layout.SAME_LENGTH.get(axis, axis), n)
+        lengths = [sizes[table_layout.SAME_LENGTH.get(axis, axis)] for axis in axes[:len(shape)]]
+        if len(shape) != len(axes) or shape != tuple(lengths):
+            shown = tuple(sizes.get(table_layout.SAME_LENGTH.get(axis, axis), "any") for axis in axes)
             raise TableError(f"{name} has shape {shape}, expected {shown} ({' x '.join(axes)})")
     for name, values in arrays.items():
         if values.dtype.kind == "f":

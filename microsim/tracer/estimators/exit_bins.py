@@ -18,6 +18,8 @@ from microsim.core.orders import ORDERS, RESULT_ALL_ORDERS, RESULT_ORDER1_BASE, 
 from microsim.core.table_layout import Dataset
 from microsim.tracer.estimators import Estimator
 
+#: datasets that tables of format 1.0 may lack (they came while 1.0 was written): their ``since``
+SINCE = {name: "1.1" for name in ("brdf_orders12", "brdf_order1_base", "albedo_orders12", "albedo_order1_base")}
 #: the row of the tally after the orders: order-1 exits scattered by the base plane
 BASE_ROW = ORDERS
 TALLY_ROWS = ORDERS + 1
@@ -55,9 +57,9 @@ class ExitBins(Estimator):
              False),
         )
         for dataset in (
-            Dataset(name, axes, unit, doc, when=when, required=required),
+            Dataset(name, axes, unit, doc, when=when, required=required, since=SINCE.get(name, "1.0")),
             Dataset(f"{name}_stderr", axes, unit, f"standard error of {name}, from the spread of the realizations",
-                    when=when, required=required),
+                    when=when, required=required, since=SINCE.get(name, "1.0")),
         )
     )
 

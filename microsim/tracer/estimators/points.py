@@ -190,9 +190,9 @@ class Points(Estimator):
         Dataset("brdf_points_covariance", ("incidences", "points", "other_points"), "1/sr^2", "covariance of the errors "
                 "of brdf_points between the points of each incidence (they share their paths), from the spread "
                 "of the realizations; its diagonal is brdf_points_stderr squared",
-                when=WHEN),
+                when=WHEN, since="1.1"),
         Dataset("brdf_points_order_covariance", ("incidences", "orders", "points", "other_points"), "1/sr^2",
-                "brdf_points_covariance of each order", when=WHEN),
+                "brdf_points_covariance of each order", when=WHEN, since="1.1"),
     ) + tuple(
         Dataset(f"sensor/points_{name}", axes, unit, doc, when=WHEN)
         for name, axes, unit, doc in (
