@@ -62,7 +62,7 @@ def micrograin_config(field, grain, base=None, theta=THETA_I, phi=None, paths=1_
 
 
 def single_runs(grain, field):
-    """(theta_i list, paths per incidence) of the item-b runs: noise alone near 1 % median |rel|.
+    """(theta_i list, paths per incidence) of the order-1 runs: noise alone near 1 % median |rel|.
     Specular exits light fewer cells; at 86 deg along the narrow axis of the anisotropic field the
     median relative standard error is still 2.9 % at 8 M paths (noise alone: 0.674 x 2.9 % = 2.0 %
     median |rel|), so that incidence gets 24 M."""

@@ -86,9 +86,8 @@ def direction(theta_deg: float, phi_deg: float = 0.0) -> np.ndarray:
 def trace(scene, backend: str, paths: int, sensor, realization: int = 0, theta: float = 60.0, phi: float = 30.0,
           points=()):
     """The tally of ``paths`` paths, binned on ``sensor`` and, with ``points`` ([theta_o, phi_o]
-    pairs, deg), read there by next-event estimation too."""
-    estimators = build(("exit_bins",), sensor) + ((Points(sensor, keys=PointsKeys(directions_deg=points)),)
-                                                  if points else ())
+    pairs, deg), read there by next-event estimation too: a run's estimators, so a run's kernel."""
+    estimators = build(("exit_bins", "retro_rings"), sensor) + (Points(sensor, keys=PointsKeys(directions_deg=list(points))),)
     tracer = SurfaceTracer(scene, sensor, backend, estimators=estimators)
     return tracer.trace(direction(theta, phi), paths, stream_key(5, realization, 0), 0)
 
@@ -212,7 +211,7 @@ def cell_estimates(scene, backend, sensor, realizations, paths, points):
     for r in range(realizations):
         tally = trace(scene, backend, paths, sensor, realization=r, points=points)
         rows.append(np.concatenate([tally.estimates[0].weight[0, :ORDERS].sum(axis=1),
-                                    tally.estimates[1].weight[0].sum(axis=0)]) / paths)
+                                    tally.estimates[2].weight[0].sum(axis=0)]) / paths)
     return np.array(rows)
 
 

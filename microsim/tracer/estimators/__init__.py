@@ -47,8 +47,9 @@ from microsim.core.tally import albedo_axis
 ESTIMATORS = {"exit_bins": "microsim.tracer.estimators.exit_bins:ExitBins",
               "retro_rings": "microsim.tracer.estimators.retro_rings:RetroRingBins",
               "points": "microsim.tracer.estimators.points:Points"}
-#: the estimators of a tracer used without a run (tests, benchmarks)
-DEFAULT = ("exit_bins",)
+#: the estimators of a tracer used without a run (tests, benchmarks): every run's, so that it takes
+#: the kernel a run compiled (numba specializes the kernels on the estimators' records)
+DEFAULT = ("exit_bins", "retro_rings", "points")
 
 
 class Estimator:
