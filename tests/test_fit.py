@@ -60,6 +60,7 @@ def synthetic(table, exact, rng):
 @pytest.mark.parametrize("name,truth,start", [
     ("oren_nayar", {"albedo": 0.7, "roughness": 0.4}, {"albedo": "0.5", "roughness": "0.1"}),
     ("rte_isotropic", {"albedo": 0.95}, {"albedo": "0.5"}),
+    ("hapke", {"albedo": 0.8, "volume_fraction": 0.3}, {"albedo": "0.5", "volume_fraction": "0.1"}),
 ])
 def test_recovers_the_parameters_of_a_table_made_from_a_model(medium_table, name, truth, start):
     """DRAWS tables made from the model with independent noise:
