@@ -5,7 +5,7 @@ its scenes (a key of ``microsim.tracer.integrators.INTEGRATORS``; "surface" for 
 ``Config``, the pydantic model of its ``[scene]`` table; ``check(config)``, cross-section rules
 (raises ValueError with a one-line message); ``for_backend(config, backend) -> (config, note)``,
 the config as that Embree backend can trace it (the note says what was substituted, "" if
-nothing); ``resolve(config) -> dict``, every scene parameter
+nothing; ValueError, one line, if that backend cannot trace the scene); ``resolve(config) -> dict``, every scene parameter
 with its defaults filled in (stored in the table's ``scene/`` attrs); ``scene_bytes(resolved)``,
 about how much memory one realization takes once built for Embree (the runner refuses a run
 that cannot fit); and
@@ -21,7 +21,16 @@ Optionally ``SIZE``, the advice the memory refusal gives on a scene's size
 (default: lower the scene's tile or depth).
 """
 
-from microsim.geometry import halfspace_medium, heightfield, mesh, micrograins, plane, poisson_spheres, vcavities
+from microsim.geometry import (
+    halfspace_medium,
+    heightfield,
+    mesh,
+    micrograins,
+    packed_spheres,
+    plane,
+    poisson_spheres,
+    vcavities,
+)
 
-SCENES = {module.KIND: module for module in (plane, poisson_spheres, micrograins, vcavities, halfspace_medium, mesh,
-                                            heightfield)}
+SCENES = {module.KIND: module for module in (plane, poisson_spheres, packed_spheres, micrograins, vcavities,
+                                            halfspace_medium, mesh, heightfield)}

@@ -238,15 +238,32 @@ def scene_bytes(resolved: dict) -> int:
     return int(spheres * per_sphere)
 
 
+def slab(config, free_path_length: float) -> dict:
+    """The slab's resolved parameters of a scene of spheres of void free path ``free_path_length``:
+    the free path, the albedo the defaults assume, the depth and the tile (given or defaulted,
+    module doc) and the tile's bias floor."""
+    scene = config.scene
+    c = config.material.albedo_bound()
+    tau = default_optical_depth(c, config.run.max_order)
+    depth = scene.depth if scene.depth is not None else tau * free_path_length
+    return {
+        "free_path": free_path_length,
+        "particle_albedo_estimate": c,
+        "depth": depth,
+        "depth_default": scene.depth is None,
+        "optical_depth": depth / free_path_length,
+        "tile": scene.tile if scene.tile is not None else TILE,
+        "tile_default": scene.tile is None,
+        "tile_bias_floor": tile_bias_floor(free_path_length, max(config.illumination.theta_i_deg)),
+    }
+
+
 def resolve(config) -> dict:
     scene = config.scene
     phi = scene.volume_fraction
     n = number_density(phi)
-    l = free_path(phi)
-    c = config.material.albedo_bound()
-    tau = default_optical_depth(c, config.run.max_order)
-    depth = scene.depth if scene.depth is not None else tau * l
-    tile = scene.tile if scene.tile is not None else TILE
+    extent = slab(config, free_path(phi))
+    depth, tile = extent["depth"], extent["tile"]
     if is_exact(scene):
         model = {"sphere_model": "exact", "triangles_per_sphere": 0, "vertex_radius": 1.0, "max_mesh_error": 0.0}
     else:
@@ -263,14 +280,7 @@ def resolve(config) -> dict:
         "kind": KIND,
         "volume_fraction": phi,
         "number_density": n,
-        "free_path": l,
-        "particle_albedo_estimate": c,
-        "depth": depth,
-        "depth_default": scene.depth is None,
-        "optical_depth": depth / l,
-        "tile": tile,
-        "tile_default": scene.tile is None,
-        "tile_bias_floor": tile_bias_floor(l, max(config.illumination.theta_i_deg)),
+        **extent,
         **model,
         "shading": scene.shading,
         "expected_spheres": n * tile * tile * depth,

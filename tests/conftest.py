@@ -1,6 +1,7 @@
 """The fixtures of the suite: ``simulate``, a config dictionary run end to end and its table read
 back (:mod:`microsim.testing.tables`); and the rule that a test of a million paths or more is
-marked ``slow``, checked on every test.
+marked ``slow``, checked on every test; and a packing cache of each test process's own
+(``MICROSIM_CACHE``, :mod:`microsim.geometry.packings`).
 
 The paths a test traces are counted where every run hands its units to an executor
 (``runner.EXECUTORS``: paths per realization for every unit it hands back traced, in this
@@ -9,6 +10,9 @@ not traced, nor counted), during the test and during the setup of each fixture i
 that reaches :data:`SLOW_PATHS` without the ``slow`` marker fails and says how many it traced.
 Runs in subprocesses, and tracers a test calls itself (``executors.trace_units``), are not counted.
 """
+
+import os
+import tempfile
 
 import pytest
 
@@ -35,6 +39,8 @@ def _counting(execute):
 
 
 def pytest_configure(config):
+    # the packings a test generates are kept for this process's other tests, not in the user's cache
+    os.environ["MICROSIM_CACHE"] = tempfile.mkdtemp(prefix="microsim-cache-")
     for name, execute in runner.EXECUTORS.items():
         runner.EXECUTORS[name] = _counting(execute)
 

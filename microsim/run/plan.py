@@ -65,7 +65,10 @@ class Plan:
                 raise PlanError(f"--threads {threads}: the embreex backend traces on one thread; use --workers")
             threads, notes = 1, notes + ["one thread (the embreex backend has no threads)"]
         generator = geometry.SCENES[config.scene.kind]
-        config, substitution = generator.for_backend(config, backend)
+        try:
+            config, substitution = generator.for_backend(config, backend)
+        except ValueError as err:  # a scene that backend cannot trace (geometry/__init__.py)
+            raise PlanError(str(err)) from None
         notes += [substitution] if substitution else []
         return cls(config, generator.resolve(config), theta, phi, config.sensor.cells, run.realizations,
                    math.ceil(run.paths / run.realizations), backend, "; ".join(notes), threads, albedos_of(config),

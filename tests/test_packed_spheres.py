@@ -1,0 +1,102 @@
+"""The packed-sphere generator: no two spheres overlap (an exact pair check over the periodic
+images), the volume fraction is the one asked for, the lognormal radii have their sigma, a
+packing is generated once per key and read back from the cache, and bad input is refused in one
+line. (The white furnace, reciprocity, thread identity and a bad key: tests/test_scene_kinds.py.)"""
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from microsim import config, geometry
+from microsim.geometry import packings
+from microsim.physics.rng import geometry_rng
+from microsim.testing.refusals import assert_run_refused, small_config
+
+PACKED = geometry.SCENES["packed_spheres"]
+
+
+def scene_config(**scene):
+    return config.validate({"scene": {"kind": "packed_spheres", **scene},
+                            "material": {"kind": "lambert", "albedo": 0.8},
+                            "illumination": {"theta_i_deg": [0.0]}, "run": {"paths": 1000}})
+
+
+def packed(cfg, realization=0):
+    """The packing of a realization of ``cfg``, as a run draws it: centres in [0, tile)^2 x [-depth, 0)."""
+    return PACKED.draw(PACKED.resolve(cfg), geometry_rng(1, realization), PACKED.cache_directory(cfg))
+
+
+def smallest_contact_ratio(centres, radii, box) -> float:
+    """min over pairs i < j and the 27 periodic images of |c_i - c_j - shift| / (r_i + r_j), every
+    pair computed (no neighbour search)."""
+    best = math.inf
+    shifts = np.array([[a, b, c] for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)]) * np.asarray(box)
+    for i in range(len(centres) - 1):
+        gap = centres[i] - centres[i + 1:]
+        distance = np.linalg.norm(gap[:, None, :] - shifts[None, :, :], axis=2).min(axis=1)
+        best = min(best, float(np.min(distance / (radii[i] + radii[i + 1:]))))
+    return best
+
+
+@pytest.mark.parametrize("phi", [0.1, 0.4, 0.6])
+def test_no_two_spheres_overlap_and_the_volume_fraction_is_the_one_asked_for(phi):
+    """Three realizations a volume fraction, tile 16, depth 12: every pair at least in contact
+    (distance / (r_i + r_j) >= 1), and sum 4/3 pi r^3 / (tile^2 depth) within 0.5 % of phi."""
+    cfg = scene_config(volume_fraction=phi, tile=16.0, depth=12.0)
+    for realization in range(3):
+        packing = packed(cfg, realization)
+        box = (16.0, 16.0, 12.0)
+        assert np.all((packing.centres >= (0, 0, -12)) & (packing.centres < (16, 16, 0)))
+        ratio = smallest_contact_ratio(packing.centres, packing.radii, box)
+        assert ratio >= 1.0
+        measured = np.sum(4 / 3 * math.pi * packing.radii**3) / (16 * 16 * 12)
+        assert abs(measured / phi - 1.0) < 0.005
+
+
+def test_lognormal_radii_have_their_sigma_and_do_not_overlap():
+    """sigma = 0.3: the standard deviation of ln r within 4 of its standard errors (sigma / sqrt(2n))
+    of 0.3, and no overlap."""
+    cfg = scene_config(volume_fraction=0.3, radius_sigma=0.3, tile=26.0, depth=16.0)
+    packing = packed(cfg)
+    n, log_r = len(packing.radii), np.log(packing.radii)
+    assert n > 300
+    assert abs(log_r.std(ddof=1) - 0.3) < 4 * 0.3 / math.sqrt(2 * n)
+    assert smallest_contact_ratio(packing.centres, packing.radii, (26.0, 26.0, 16.0)) >= 1.0
+
+
+def test_a_packing_is_generated_once_per_key_and_then_read_from_the_cache():
+    """The same realization twice: generated once (the counter), the second read back, the same
+    arrays, and faster; another realization is another packing."""
+    cfg = scene_config(volume_fraction=0.55, tile=24.0, depth=16.0)
+    before = packings.GENERATED[0]
+    start = time.perf_counter()
+    first = packed(cfg, 7)
+    generating = time.perf_counter() - start
+    start = time.perf_counter()
+    second = packed(cfg, 7)
+    reading = time.perf_counter() - start
+    assert packings.GENERATED[0] == before + 1
+    assert np.array_equal(first.centres, second.centres) and np.array_equal(first.radii, second.radii)
+    assert reading < generating / 5, (reading, generating)
+    other = packed(cfg, 8)
+    assert packings.GENERATED[0] == before + 2 and not np.array_equal(other.centres, first.centres)
+
+
+@pytest.mark.parametrize("scene, key, also", [
+    ('kind = "packed_spheres"\nvolume_fraction = 0.63', "scene.volume_fraction", ("0.62",)),
+    ('kind = "packed_spheres"\nvolume_fraction = 0.3\nradius_sigma = 0.6', "scene.radius_sigma", ("0.5",)),
+    ('kind = "packed_spheres"\nvolume_fraction = 0.3\nradius_sigma = 0.5\ntile = 16.0', "scene.tile", ("diameters",)),
+    ('kind = "packed_spheres"\nvolume_fraction = 0.3\ntile = 6.0', "scene.tile", ("8",)),
+    ('kind = "packed_spheres"\nvolume_fraction = 0.3\ntile = 8.0\ndepth = 4.0\ncache = "/proc/no_cache"',
+     "packing cache", ("/proc/no_cache",)),
+], ids=["beyond the packer's reach", "too wide a size distribution", "a tile of too few diameters",
+        "a tile of too few diameters of equal spheres", "a cache that cannot be written"])
+def test_bad_input_is_refused_in_one_line_and_nothing_is_written(scene, key, also, tmp_path, capsys):
+    assert_run_refused(small_config(scene), key, tmp_path, capsys, *also)
+
+
+def test_the_embreex_backend_is_refused_naming_the_key(tmp_path, capsys):
+    text = small_config('kind = "packed_spheres"\nvolume_fraction = 0.3\ntile = 8.0\ndepth = 4.0')
+    assert_run_refused(text + 'backend = "embreex"\n', "run.backend", tmp_path, capsys, "direct")
