@@ -31,3 +31,14 @@ def _mean_z2(n_cells: int, realizations: int) -> tuple[float, float]:
     nu = realizations - 1
     variance = 2 * nu**2 * (nu - 1) / ((nu - 2) ** 2 * (nu - 4))
     return nu / (nu - 2), 5 * math.sqrt(variance / n_cells)
+
+
+def mean_z2_interval(n_cells: int, realizations: int, level: float = 0.99) -> tuple[float, float]:
+    """The two-sided ``level`` interval of the mean z^2 over n Student-t cells (R - 1 degrees of
+    freedom), in the normal approximation of the mean: its expectation -+ the normal quantile
+    times its standard deviation."""
+    from scipy.stats import norm
+
+    mean, five = _mean_z2(n_cells, realizations)
+    half = norm.ppf(0.5 + level / 2) * five / 5
+    return mean - half, mean + half
