@@ -1,7 +1,7 @@
 """The packed-sphere generator: no two spheres overlap (an exact pair check over the periodic
 images), the volume fraction is the one asked for, the lognormal radii have their sigma, a
-packing is generated once per key and read back from the cache, and bad input is refused in one
-line. (The white furnace, reciprocity, thread identity and a bad key: tests/test_scene_kinds.py.)"""
+packing is generated once per key and read back from the cache, a table is the same on two
+workers, from an empty cache and after a resume, and bad input is refused in one line. (The white furnace, reciprocity, thread identity and a bad key: tests/test_scene_kinds.py.)"""
 
 import math
 import time
@@ -10,9 +10,15 @@ import numpy as np
 import pytest
 
 from microsim import config, geometry
+from microsim.cli import main
 from microsim.geometry import packings
 from microsim.physics.rng import geometry_rng
+from microsim.run import unit_store
+from microsim.run.plan import Plan
+from microsim.tables import dict_to_toml
+from microsim.testing import example, trace
 from microsim.testing.refusals import assert_run_refused, small_config
+from microsim.testing.tables import same_table
 
 PACKED = geometry.SCENES["packed_spheres"]
 
@@ -82,6 +88,34 @@ def test_a_packing_is_generated_once_per_key_and_then_read_from_the_cache():
     assert reading < generating / 5, (reading, generating)
     other = packed(cfg, 8)
     assert packings.GENERATED[0] == before + 2 and not np.array_equal(other.centres, first.centres)
+
+
+def test_a_table_is_the_same_on_two_workers_after_a_resume_and_from_an_empty_cache(tmp_path, monkeypatch, capsys):
+    """The example on one worker; on two (the packings read from the cache); from an empty cache
+    (every packing generated again from the run's seed); and resumed with half its units kept (the
+    other half's packings read back): the same table, byte for byte."""
+    cfg_path = tmp_path / "run.toml"
+    cfg_path.write_text(dict_to_toml(example("packed_spheres")))
+    for name, flags in (("one", []), ("two", ["--workers", "2"])):
+        assert main(["run", str(cfg_path), "--out", str(tmp_path / f"{name}.h5"), *flags]) == 0
+    monkeypatch.setenv("MICROSIM_CACHE", str(tmp_path / "empty cache"))
+    before = packings.GENERATED[0]
+    assert main(["run", str(cfg_path), "--out", str(tmp_path / "fresh.h5")]) == 0
+    realizations = example("packed_spheres")["run"]["realizations"]
+    assert packings.GENERATED[0] == before + realizations
+    resumed = tmp_path / "resumed.h5"
+    cfg = config.validate(example("packed_spheres"))
+    store = unit_store.UnitStore.open(unit_store.store_path(resumed), Plan.from_config(cfg), resume=False)
+    trace(cfg, store=store)
+    store.release()
+    kept = sorted(unit_store.store_path(resumed).glob("r*_i*.npz"))
+    for unit in kept[::2]:
+        unit.unlink()
+    assert main(["run", str(cfg_path), "--out", str(resumed), "--resume"]) == 0
+    assert packings.GENERATED[0] == before + realizations  # the resumed units' packings read back
+    capsys.readouterr()
+    for name in ("two", "fresh", "resumed"):
+        assert same_table(tmp_path / "one.h5", tmp_path / f"{name}.h5"), name
 
 
 @pytest.mark.parametrize("scene, key, also", [
