@@ -9,6 +9,16 @@ chi-square per cell with its two-sided bounds, the albedos' mean z^2 with its bo
 |rel| over the cells with signal, and the albedos. JSON in benchmarks/out/packing_study.json.
 
     python benchmarks/packing_study.py --part dilute [--paths 400000] [--workers 2]
+
+``--part study``: packed against Boolean at --phis (default 0.1, 0.3, 0.5, 0.6), albedos 0.3, 0.8
+and 0.95 traced together (one run each kind and phi), the same incidences and cells, --paths
+paths an incidence over --realizations realizations. Per phi and albedo: the packed/Boolean
+albedo ratio at each incidence with its standard error, and the median |rel| over the cells with
+signal of ``lambert_sphere`` (method exact: the radiative-transfer half space of the grains),
+``hapke`` (its defaults with the grains' albedo and the scene's volume fraction, and with the
+anisotropic multiple scattering) on each kind.
+
+    python benchmarks/packing_study.py --part study [--phis 0.1 0.3] [--paths 100000] [--realizations 8]
 """
 
 from __future__ import annotations
@@ -22,7 +32,9 @@ import numpy as np
 from report import save_figures
 
 from microsim import config
+from microsim import tables as tables_module
 from microsim.analysis import compare
+from microsim.app import session
 from microsim.models.tabulated import TabulatedBRDF
 from microsim.testing import trace_table
 
@@ -32,12 +44,26 @@ SCENES = {"packed": {"kind": "packed_spheres", "volume_fraction": 0.01},
           "transfer": {"kind": "halfspace_medium", "phase": "lambert_sphere"}}
 
 
-def table(directory: Path, scene: dict, albedo: float, paths: int, cells: int, workers: int):
-    cfg = config.validate({"scene": scene, "material": {"kind": "lambert", "albedo": albedo},
-                           "illumination": {"theta_i_deg": THETA_I}, "sensor": {"cells": cells},
-                           "run": {"paths": paths, "realizations": 16, "seed": 11}})
+ALBEDOS = [0.3, 0.8, 0.95]
+#: the models of the study: name -> (model, its parameters given the albedo and the volume fraction)
+MODELS = {"lambert_sphere": lambda c, phi: ("lambert_sphere", {"albedo": c, "method": "exact"}),
+          "hapke IMSA": lambda c, phi: ("hapke", {"albedo": c, "volume_fraction": phi}),
+          "hapke AMSA": lambda c, phi: ("hapke", {"albedo": c, "volume_fraction": phi,
+                                                  "multiple_scattering": "anisotropic"})}
+
+
+def table(directory: Path, scene: dict, albedo, paths: int, cells: int, workers: int, realizations: int = 16):
+    """The table of ``scene`` (a list of tables, one per albedo, for a list of albedos traced
+    together, as ``microsim run`` traces them) and the seconds it took."""
+    data = {"scene": scene, "material": {"kind": "lambert", "albedo": albedo},
+            "illumination": {"theta_i_deg": THETA_I}, "sensor": {"cells": cells},
+            "run": {"paths": paths, "realizations": realizations, "seed": 11}}
     start = time.perf_counter()
-    traced = trace_table(cfg, directory / f"{scene['kind']}-{albedo}.h5", workers=workers)
+    name = f"{scene['kind']}-{scene.get('volume_fraction', 0)}.h5"
+    if isinstance(albedo, list):
+        outcome = session.run(data, out=directory / name, workers=workers)
+        return [tables_module.load(path) for path in outcome.tables], time.perf_counter() - start
+    traced = trace_table(config.validate(data), directory / name, workers=workers)
     return traced, time.perf_counter() - start
 
 
@@ -66,16 +92,45 @@ def dilute(args) -> dict:
     return out
 
 
+def study(args) -> dict:
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for phi in args.phis:
+            kinds = {}
+            for kind in ("packed_spheres", "poisson_spheres"):
+                kinds[kind], seconds = table(Path(tmp), {"kind": kind, "volume_fraction": phi}, ALBEDOS, args.paths,
+                                             args.cells, args.workers, args.realizations)
+                out[f"{kind} {phi} seconds"] = round(seconds, 1)
+            for j, c in enumerate(ALBEDOS):
+                packed, boolean = kinds["packed_spheres"][j], kinds["poisson_spheres"][j]
+                ratio = packed.albedo / boolean.albedo
+                error = ratio * np.hypot(packed.albedo_stderr / packed.albedo, boolean.albedo_stderr / boolean.albedo)
+                row = {"albedo ratio packed / Boolean": np.round(ratio, 4).tolist(),
+                       "its stderr": np.round(error, 4).tolist(),
+                       "packed albedo": np.round(packed.albedo, 4).tolist(),
+                       "Boolean albedo": np.round(boolean.albedo, 4).tolist()}
+                for label, make in MODELS.items():
+                    name, params = make(c, phi)
+                    for kind, t in (("packed", packed), ("Boolean", boolean)):
+                        row[f"{label} on {kind}: median |rel|"] = round(
+                            compare.compare(t, name, **params).metrics()["median_abs_rel_err"], 4)
+                out[f"phi {phi}, c {c}"] = row
+                print(f"phi {phi}, c {c}: {row}", flush=True)
+    return out
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--part", choices=["dilute"], default="dilute")
+    parser.add_argument("--part", choices=["dilute", "study"], default="dilute")
+    parser.add_argument("--phis", type=float, nargs="+", default=[0.1, 0.3, 0.5, 0.6])
+    parser.add_argument("--realizations", type=int, default=8)
     parser.add_argument("--paths", type=int, default=400_000)
     parser.add_argument("--cells", type=int, default=400)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
     args = parser.parse_args()
-    figures = {"dilute": dilute(args)}
-    save_figures(figures, "packing_study", args.json)
+    figures = {"dilute": dilute(args)} if args.part == "dilute" else {"study": study(args)}
+    save_figures(figures, f"packing_study_{args.part}", args.json)
 
 
 if __name__ == "__main__":
