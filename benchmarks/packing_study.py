@@ -16,7 +16,10 @@ paths an incidence over --realizations realizations. Per phi and albedo: the pac
 albedo ratio at each incidence with its standard error, and the median |rel| over the cells with
 signal of ``lambert_sphere`` (method exact: the radiative-transfer half space of the grains),
 ``hapke`` (its defaults with the grains' albedo and the scene's volume fraction, and with the
-anisotropic multiple scattering) on each kind.
+anisotropic multiple scattering) on each kind; and the fits (``--fits``) of ``hapke`` (AMSA;
+albedo and volume fraction free) and ``vmf_diffuse`` (its roughness r free, the grains' albedo
+given) to each table: the fitted values with their standard errors, chi-square per degree of
+freedom and the fit's median |rel|.
 
     python benchmarks/packing_study.py --part study [--phis 0.1 0.3] [--paths 100000] [--realizations 8]
 """
@@ -34,6 +37,7 @@ from report import save_figures
 from microsim import config
 from microsim import tables as tables_module
 from microsim.analysis import compare
+from microsim.analysis.fit import fit
 from microsim.app import session
 from microsim.models.tabulated import TabulatedBRDF
 from microsim.testing import trace_table
@@ -50,6 +54,13 @@ MODELS = {"lambert_sphere": lambda c, phi: ("lambert_sphere", {"albedo": c, "met
           "hapke IMSA": lambda c, phi: ("hapke", {"albedo": c, "volume_fraction": phi}),
           "hapke AMSA": lambda c, phi: ("hapke", {"albedo": c, "volume_fraction": phi,
                                                   "multiple_scattering": "anisotropic"})}
+
+
+#: the fits of the study: label -> (model, free parameters, fixed ones and starts given c and phi)
+FITS = {"hapke AMSA fit": ("hapke", ["albedo", "volume_fraction"],
+                           lambda c, phi: {"albedo": c, "volume_fraction": min(phi, 0.7),
+                                           "multiple_scattering": "anisotropic"}),
+        "vmf_diffuse fit": ("vmf_diffuse", ["roughness"], lambda c, phi: {"albedo": c, "roughness": 0.5})}
 
 
 def table(directory: Path, scene: dict, albedo, paths: int, cells: int, workers: int, realizations: int = 16):
@@ -114,6 +125,14 @@ def study(args) -> dict:
                     for kind, t in (("packed", packed), ("Boolean", boolean)):
                         row[f"{label} on {kind}: median |rel|"] = round(
                             compare.compare(t, name, **params).metrics()["median_abs_rel_err"], 4)
+                if args.fits:
+                    for kind, t in (("packed", packed), ("Boolean", boolean)):
+                        for label, (name, free, fixed) in FITS.items():
+                            fitted = fit(t, name, free, fixed(c, phi))
+                            row[f"{label} on {kind}"] = {
+                                "fit": {k: [round(v, 4), round(e, 4)] for k, (v, e) in fitted.free.items()},
+                                "chi2_per_dof": round(fitted.chi2_per_dof, 2),
+                                "median |rel|": round(fitted.comparison.metrics()["median_abs_rel_err"], 4)}
                 out[f"phi {phi}, c {c}"] = row
                 print(f"phi {phi}, c {c}: {row}", flush=True)
     return out
@@ -124,6 +143,7 @@ def main():
     parser.add_argument("--part", choices=["dilute", "study"], default="dilute")
     parser.add_argument("--phis", type=float, nargs="+", default=[0.1, 0.3, 0.5, 0.6])
     parser.add_argument("--realizations", type=int, default=8)
+    parser.add_argument("--fits", action="store_true", help="fit hapke and vmf_diffuse to every table (study)")
     parser.add_argument("--paths", type=int, default=400_000)
     parser.add_argument("--cells", type=int, default=400)
     parser.add_argument("--workers", type=int, default=2)
