@@ -22,6 +22,10 @@ given) to each table: the fitted values with their standard errors, chi-square p
 freedom and the fit's median |rel|.
 
     python benchmarks/packing_study.py --part study [--phis 0.1 0.3] [--paths 100000] [--realizations 8]
+
+``--part cost``: one realization of about 10^4 equal spheres (phi = 0.6, tile 64, depth 17): the
+seconds to generate its packing (an empty cache), to read it back, to build its Embree scene and
+to trace --paths paths at normal incidence on one thread.
 """
 
 from __future__ import annotations
@@ -138,9 +142,40 @@ def study(args) -> dict:
     return out
 
 
+def cost(args) -> dict:
+    import os
+
+    from microsim import geometry
+    from microsim.physics.rng import geometry_rng, stream_key
+    from microsim.run.plan import Plan
+
+    with tempfile.TemporaryDirectory() as tmp:
+        os.environ["MICROSIM_CACHE"] = tmp
+        cfg = config.validate({"scene": {"kind": "packed_spheres", "volume_fraction": 0.6, "tile": 64.0, "depth": 17.0},
+                               "material": {"kind": "lambert", "albedo": 0.8}, "illumination": {"theta_i_deg": [0.0]},
+                               "run": {"paths": args.paths, "realizations": 2, "seed": 5}})
+        plan = Plan.from_config(cfg)
+        generator, out = geometry.SCENES["packed_spheres"], {}
+        for step in ("generate", "read back"):
+            start = time.perf_counter()
+            scene = generator.generate(plan.scene, plan.config, geometry_rng(5, 0))
+            out[f"{step} s"] = round(time.perf_counter() - start, 3)
+        out["spheres"] = scene.info["spheres"]
+        start = time.perf_counter()
+        tracer = plan.tracer_class(scene, plan.sensor, estimators=plan.estimators, **plan.tracer_options)
+        out["Embree scene s"] = round(time.perf_counter() - start, 3)
+        tracer.trace(plan.incidence_direction(0), 1000, stream_key(5, 0, 0), 0, plan.albedo_scale, 0.0)  # compiled
+        start = time.perf_counter()
+        tracer.trace(plan.incidence_direction(0), args.paths, stream_key(5, 0, 0), 0, plan.albedo_scale, 0.0)
+        out["trace s"] = round(time.perf_counter() - start, 3)
+        out["paths"] = args.paths
+    print(out)
+    return out
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--part", choices=["dilute", "study"], default="dilute")
+    parser.add_argument("--part", choices=["dilute", "study", "cost"], default="dilute")
     parser.add_argument("--phis", type=float, nargs="+", default=[0.1, 0.3, 0.5, 0.6])
     parser.add_argument("--realizations", type=int, default=8)
     parser.add_argument("--fits", action="store_true", help="fit hapke and vmf_diffuse to every table (study)")
@@ -149,7 +184,7 @@ def main():
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
     args = parser.parse_args()
-    figures = {"dilute": dilute(args)} if args.part == "dilute" else {"study": study(args)}
+    figures = {args.part: {"dilute": dilute, "study": study, "cost": cost}[args.part](args)}
     save_figures(figures, f"packing_study_{args.part}", args.json)
 
 
