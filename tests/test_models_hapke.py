@@ -10,7 +10,7 @@ import pytest
 from microsim import models
 from microsim.core.frames import direction
 from microsim.models.hapke import APPROXIMATE_H_ACCURACY, PHI_MAX, approximate_h, porosity_factor
-from microsim.models.hapke_roughness import roughness_cosines
+from microsim.models.hapke_roughness import azimuth_difference, roughness_cosines
 from microsim.models.hfunctions import ISOTROPIC_MODE, HFunction
 from microsim.models.quadrature import directional_albedo
 from microsim.models.radiative_transfer import single_scattering
@@ -169,8 +169,7 @@ def test_the_roughness_at_its_known_points():
     nearly = models.create("hapke", albedo=0.7, volume_fraction=0.3, roughness_deg=1e-5)(wi, wo)
     np.testing.assert_allclose(nearly, smooth, rtol=1e-5)
     cos_i, cos_e = wi[:, 2], wo[:, 2]
-    psi = np.abs(np.angle(np.exp(1j * (np.arctan2(wo[:, 1], wo[:, 0]) - np.arctan2(wi[:, 1], wi[:, 0])))))
-    _, _, s = roughness_cosines(cos_i, cos_e, psi, math.radians(45.0))
+    _, _, s = roughness_cosines(cos_i, cos_e, azimuth_difference(wi, wo), math.radians(45.0))
     assert np.all(s > 0.0)
     angles = np.radians(np.linspace(0.0, 89.0, 30))
     for theta_bar in np.radians([10.0, 45.0]):

@@ -44,7 +44,7 @@ import math
 import numpy as np
 
 from microsim.models.base import BRDFModel, Param, register
-from microsim.models.hapke_roughness import roughness_cosines
+from microsim.models.hapke_roughness import azimuth_difference, roughness_cosines
 from microsim.models.hfunctions import ISOTROPIC_MODE, HFunction
 
 #: the largest volume fraction of the porosity factor (1.209 phi^(2/3) < 1)
@@ -185,8 +185,7 @@ class Hapke(BRDFModel):
             tan_half = np.linalg.norm(wi - wo, axis=1) / np.linalg.norm(wi + wo, axis=1)  # tan(g/2), accurate at g = 0
             single = single * (1.0 + self.opposition_amplitude / (1.0 + tan_half / self.opposition_width))
         if self.roughness_deg > 0.0:
-            psi = np.abs(np.angle(np.exp(1j * (np.arctan2(wo[:, 1], wo[:, 0]) - np.arctan2(wi[:, 1], wi[:, 0])))))
-            mu0e, mue, shadowing = roughness_cosines(mu0, mu, psi, math.radians(self.roughness_deg))
+            mu0e, mue, shadowing = roughness_cosines(mu0, mu, azimuth_difference(wi, wo), math.radians(self.roughness_deg))
         else:
             mu0e, mue, shadowing = mu0, mu, 1.0
         r = self.k * self.albedo / (4.0 * math.pi) * mu0e / (mu0e + mue) * (single + self.multiple(mu0e, mue))

@@ -27,6 +27,11 @@ import math
 import numpy as np
 
 
+def azimuth_difference(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    """psi in [0, pi] between the azimuths of directions (n, 3) ``wi`` and ``wo`` (0: the same side)."""
+    return np.abs(np.angle(np.exp(1j * (np.arctan2(wo[:, 1], wo[:, 0]) - np.arctan2(wi[:, 1], wi[:, 0])))))
+
+
 def roughness_cosines(cos_i, cos_e, psi, theta_bar: float):
     """(mu0e, mue, S) of directions of cosines ``cos_i``, ``cos_e`` (> 0) and azimuth difference
     ``psi`` in [0, pi], for a mean slope angle ``theta_bar`` in (0, pi/2) radians."""

@@ -51,8 +51,13 @@ class Table:
 
     @property
     def format_version(self) -> str:
-        """The layout's version the table was written in (1.0 for a table without the attribute)."""
-        return str(self.attrs.get("format_version", "1.0"))
+        """The layout's version the table was written in (:func:`format_version`)."""
+        return format_version(self.attrs)
+
+
+def format_version(attrs) -> str:
+    """The layout's version of a table of root attributes ``attrs`` (1.0 for a table without the attribute)."""
+    return str(attrs.get("format_version", "1.0"))
 
 
 class TableError(ValueError):
@@ -77,7 +82,7 @@ def load(path: str | Path) -> Table:
             raise TableError(f"HDF5 structure is damaged ({err})") from None
     if "microsim_version" not in attrs or "config_toml" not in attrs:
         raise TableError("not a microsim table (no microsim_version and config_toml attributes)")
-    version = str(attrs.get("format_version", "1.0"))  # Table.format_version
+    version = format_version(attrs)
     if version.split(".")[0] != table_layout.FORMAT_VERSION.split(".")[0]:
         raise TableError(f"format_version {version}: this microsim reads tables of format "
                          f"{table_layout.FORMAT_VERSION.split('.')[0]}.x")
