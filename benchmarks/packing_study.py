@@ -10,18 +10,24 @@ chi-square per cell with its two-sided bounds, the albedos' mean z^2 with its bo
 
     python benchmarks/packing_study.py --part dilute [--paths 400000] [--workers 2]
 
-``--part study``: packed against Boolean at --phis (default 0.1, 0.3, 0.5, 0.6), albedos 0.3, 0.8
-and 0.95 traced together (one run each kind and phi), the same incidences and cells, --paths
-paths an incidence over --realizations realizations. Per phi and albedo: the packed/Boolean
-albedo ratio at each incidence with its standard error, and the median |rel| over the cells with
-signal of ``lambert_sphere`` (method exact: the radiative-transfer half space of the grains),
-``hapke`` (its defaults with the grains' albedo and the scene's volume fraction, and with the
-anisotropic multiple scattering) on each kind; and the fits (``--fits``) of ``hapke`` (AMSA;
-albedo and volume fraction free) and ``vmf_diffuse`` (its roughness r free, the grains' albedo
-given) to each table: the fitted values with their standard errors, chi-square per degree of
-freedom and the fit's median |rel|.
+``--part study``: packed against Boolean at --phis (default 0.01, 0.1, 0.2, ..., 0.6), albedos
+0.3, 0.8 and 0.95 traced together (one run each kind and phi), the same incidences and cells,
+the retro points ``RETRO_POINTS_DEG`` (next-event estimation at phase angles from the retro
+direction), --paths paths an incidence over --realizations realizations. Per phi and albedo: the
+packed/Boolean albedo ratio at each incidence with its standard error; the chi-square per cell
+of the packed table against the Boolean one order by order (1, 2, 3, 4+) with its two-sided
+bounds; the opposition peak of each kind, f at retro over f at ``PEAK_REFERENCE_DEG`` from it,
+at each incidence with its standard error (the points' covariance); the median |rel| over the
+cells with signal of ``lambert_sphere`` (method exact: the radiative-transfer half space of the
+grains) and ``hapke`` (its defaults with the grains' albedo and the scene's volume fraction, and
+with the anisotropic multiple scattering) on each kind; at phi <= 0.1 the finite-size
+single-scattering model ``boolean_spheres_single`` against order 1 at the retro points (its
+chi-square over the points, with their covariance); and the fits (``--fits``) of ``hapke``
+(AMSA; albedo and volume fraction free) and ``vmf_diffuse`` (its roughness r free, the grains'
+albedo given) to each table: the fitted values with their standard errors, chi-square per degree
+of freedom and the fit's median |rel|.
 
-    python benchmarks/packing_study.py --part study [--phis 0.1 0.3] [--paths 100000] [--realizations 8]
+    python benchmarks/packing_study.py --part study [--phis 0.1 0.3] [--paths 100000] [--realizations 8] [--fits]
 
 ``--part cost``: one realization of about 10^4 equal spheres (phi = 0.6, tile 64, depth 17): the
 seconds to generate its packing (an empty cache), to read it back, to build its Embree scene and
@@ -53,6 +59,12 @@ SCENES = {"packed": {"kind": "packed_spheres", "volume_fraction": 0.01},
 
 
 ALBEDOS = [0.3, 0.8, 0.95]
+#: the study's retro points (phase angles from the retro direction, deg); the opposition peak is
+#: f at the first over f at PEAK_REFERENCE_DEG
+RETRO_POINTS_DEG = [0.0, 0.5, 1.0, 2.0, 5.0, 10.0]
+PEAK_REFERENCE_DEG = 10.0
+#: the finite-size single-scattering model holds at and below this volume fraction
+SINGLE_SCATTERING_MAX_PHI = 0.1
 #: the models of the study: name -> (model, its parameters given the albedo and the volume fraction)
 MODELS = {"lambert_sphere": lambda c, phi: ("lambert_sphere", {"albedo": c, "method": "exact"}),
           "hapke IMSA": lambda c, phi: ("hapke", {"albedo": c, "volume_fraction": phi}),
@@ -67,11 +79,13 @@ FITS = {"hapke AMSA fit": ("hapke", ["albedo", "volume_fraction"],
         "vmf_diffuse fit": ("vmf_diffuse", ["roughness"], lambda c, phi: {"albedo": c, "roughness": 0.5})}
 
 
-def table(directory: Path, scene: dict, albedo, paths: int, cells: int, workers: int, realizations: int = 16):
+def table(directory: Path, scene: dict, albedo, paths: int, cells: int, workers: int, realizations: int = 16,
+          retro_points: list | None = None):
     """The table of ``scene`` (a list of tables, one per albedo, for a list of albedos traced
     together, as ``microsim run`` traces them) and the seconds it took."""
+    sensor = {"cells": cells, **({"retro_points_deg": retro_points} if retro_points else {})}
     data = {"scene": scene, "material": {"kind": "lambert", "albedo": albedo},
-            "illumination": {"theta_i_deg": THETA_I}, "sensor": {"cells": cells},
+            "illumination": {"theta_i_deg": THETA_I}, "sensor": sensor,
             "run": {"paths": paths, "realizations": realizations, "seed": 11}}
     start = time.perf_counter()
     name = f"{scene['kind']}-{scene.get('volume_fraction', 0)}.h5"
@@ -114,7 +128,7 @@ def study(args) -> dict:
             kinds = {}
             for kind in ("packed_spheres", "poisson_spheres"):
                 kinds[kind], seconds = table(Path(tmp), {"kind": kind, "volume_fraction": phi}, ALBEDOS, args.paths,
-                                             args.cells, args.workers, args.realizations)
+                                             args.cells, args.workers, args.realizations, RETRO_POINTS_DEG)
                 out[f"{kind} {phi} seconds"] = round(seconds, 1)
             for j, c in enumerate(ALBEDOS):
                 packed, boolean = kinds["packed_spheres"][j], kinds["poisson_spheres"][j]
@@ -124,6 +138,20 @@ def study(args) -> dict:
                        "its stderr": np.round(error, 4).tolist(),
                        "packed albedo": np.round(packed.albedo, 4).tolist(),
                        "Boolean albedo": np.round(boolean.albedo, 4).tolist()}
+                for order in ("1", "2", "3", "4+"):
+                    metrics = compare.compare(packed, TabulatedBRDF(boolean), order=order).metrics()
+                    row[f"order {order} packed against Boolean: chi2 per cell"] = [
+                        round(metrics["chi2_per_cell"], 3), [round(x, 3) for x in metrics["chi2_bounds"]]]
+                for kind, t in (("packed", packed), ("Boolean", boolean)):
+                    peak, error = opposition_peak(t)
+                    row[f"opposition peak {kind}"] = np.round(peak, 4).tolist()
+                    row[f"opposition peak {kind} stderr"] = np.round(error, 4).tolist()
+                if phi <= SINGLE_SCATTERING_MAX_PHI:
+                    for kind, t in (("packed", packed), ("Boolean", boolean)):
+                        metrics = compare.compare(t, "boolean_spheres_single", order="1", on="points", albedo=c,
+                                                  volume_fraction=phi).metrics()
+                        row[f"boolean_spheres_single on {kind} order 1 at the retro points"] = {
+                            key: metrics[key] for key in ("chi2_per_point", "chi2_bounds", "consistent") if key in metrics}
                 for label, make in MODELS.items():
                     name, params = make(c, phi)
                     for kind, t in (("packed", packed), ("Boolean", boolean)):
@@ -140,6 +168,16 @@ def study(args) -> dict:
                 out[f"phi {phi}, c {c}"] = row
                 print(f"phi {phi}, c {c}: {row}", flush=True)
     return out
+
+
+def opposition_peak(t) -> tuple[np.ndarray, np.ndarray]:
+    """(n_i,) f at retro over f at PEAK_REFERENCE_DEG from it, and its standard error from the
+    points' covariance (they share their paths)."""
+    a, b = 0, RETRO_POINTS_DEG.index(PEAK_REFERENCE_DEG)
+    f, cov = t.arrays["brdf_points"], t.arrays["brdf_points_covariance"]
+    ratio = f[:, a] / f[:, b]
+    relative = cov[:, a, a] / f[:, a] ** 2 + cov[:, b, b] / f[:, b] ** 2 - 2 * cov[:, a, b] / (f[:, a] * f[:, b])
+    return ratio, ratio * np.sqrt(np.maximum(relative, 0.0))
 
 
 def cost(args) -> dict:
@@ -176,7 +214,7 @@ def cost(args) -> dict:
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--part", choices=["dilute", "study", "cost"], default="dilute")
-    parser.add_argument("--phis", type=float, nargs="+", default=[0.1, 0.3, 0.5, 0.6])
+    parser.add_argument("--phis", type=float, nargs="+", default=[0.01, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
     parser.add_argument("--realizations", type=int, default=8)
     parser.add_argument("--fits", action="store_true", help="fit hapke and vmf_diffuse to every table (study)")
     parser.add_argument("--paths", type=int, default=400_000)

@@ -27,10 +27,11 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
+import pydantic
 from pydantic import Field
 
 from microsim.core.schema import Section
-from microsim.geometry import packings
+from microsim.geometry import packings, sphere_statistics, surface_statistics
 from microsim.geometry.poisson_spheres import (
     EXACT_SPHERE_BYTES,
     MIN_EXPECTED_OBJECTS,
@@ -43,7 +44,8 @@ from microsim.tracer.scene import Scene, SceneBuilder
 KIND = "packed_spheres"
 INTEGRATOR = "surface"
 #: a small whole run config of this kind, fixed seed (the generator protocol, geometry/__init__.py)
-EXAMPLE = {"scene": {"kind": "packed_spheres", "volume_fraction": 0.4, "tile": 8.0, "depth": 4.0},
+EXAMPLE = {"scene": {"kind": "packed_spheres", "volume_fraction": 0.4, "tile": 8.0, "depth": 4.0,
+                     "statistics": True, "statistics_rays": 1024},
            "material": {"kind": "lambert", "albedo": 0.8},
            "illumination": {"theta_i_deg": [0.0, 60.0]}, "sensor": {"cells": 24},
            "run": {"paths": 4000, "realizations": 4, "seed": 1}}
@@ -72,6 +74,13 @@ class Config(Section):
     tile: float | None = Field(None, ge=4.0, le=1e4, description="tile period, in radii")
     cache: str | None = Field(None, description="directory of generated packings (default: $MICROSIM_CACHE/packings, "
                               "else ~/.cache/microsim/packings)")
+    statistics: bool = sphere_statistics.statistics_key()
+    statistics_rays: int | None = sphere_statistics.rays_key()
+
+    @pydantic.model_validator(mode="after")
+    def _rays_with_statistics(self):
+        surface_statistics.check_keys(self)
+        return self
 
 
 def largest_radius(sigma: float) -> float:
@@ -138,6 +147,7 @@ def resolve(config) -> dict:
         "base_z": -depth - top,
         "z_top": top + SLAB_MARGIN,
         "z_bottom": -depth - top - SLAB_MARGIN,
+        **sphere_statistics.resolve(config, (tile, tile, depth), extent["free_path"]),
     }
 
 
@@ -168,4 +178,5 @@ def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
     info = dict(resolved, spheres=len(packed.centres), sphere_images=int(len(all_centres) - len(packed.centres)),
                 measured_volume_fraction=float(np.sum(4.0 / 3.0 * math.pi * packed.radii**3) / volume),
                 mean_radius=float(packed.radii.mean()), shrink=packed.shrink)
-    return builder.build(resolved["z_top"], resolved["z_bottom"], info)
+    return sphere_statistics.add(builder.build(resolved["z_top"], resolved["z_bottom"], info), packed.centres,
+                                 packed.radii, resolved, config, rng)

@@ -75,13 +75,14 @@ from functools import lru_cache
 from typing import Literal
 
 import numpy as np
+import pydantic
 import trimesh
 from pydantic import Field
 from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation
 
 from microsim.core.schema import Section
-from microsim.geometry import periodic_tile
+from microsim.geometry import periodic_tile, sphere_statistics, surface_statistics
 from microsim.geometry.periodic_tile import Tile
 from microsim.physics.boolean_model import free_path, number_density
 from microsim.physics.rng import geometry_rng
@@ -92,7 +93,8 @@ KIND = "poisson_spheres"
 INTEGRATOR = "surface"
 #: a small whole run config of this kind, fixed seed (the generator protocol, geometry/__init__.py): what
 #: the conformance test of every kind (tests/test_scene_kinds.py) and the CLI fuzzer start from
-EXAMPLE = {"scene": {"kind": "poisson_spheres", "volume_fraction": 0.3, "tile": 8.0, "depth": 4.0},
+EXAMPLE = {"scene": {"kind": "poisson_spheres", "volume_fraction": 0.3, "tile": 8.0, "depth": 4.0,
+                     "statistics": True, "statistics_rays": 1024},
            "material": {"kind": "lambert", "albedo": 0.8},
            "illumination": {"theta_i_deg": [0.0, 60.0]}, "sensor": {"cells": 24},
            "run": {"paths": 4000, "realizations": 4, "seed": 1}}
@@ -121,6 +123,13 @@ class Config(Section):
     shading: Literal["exact", "flat", "smooth"] = Field("exact", description="exact: hits shaded with the sphere's "
                                                         "normal; flat: each icosphere triangle with its own; smooth: "
                                                         "with its vertex normals interpolated (module doc)")
+    statistics: bool = sphere_statistics.statistics_key()
+    statistics_rays: int | None = sphere_statistics.rays_key()
+
+    @pydantic.model_validator(mode="after")
+    def _rays_with_statistics(self):
+        surface_statistics.check_keys(self)
+        return self
 
 
 #: a realization expects at least this many spheres (or grains): a Poisson count of 10 is 0 with
@@ -286,6 +295,7 @@ def resolve(config) -> dict:
         "expected_spheres": n * tile * tile * depth,
         "base": config.base.kind if config.base is not None else "none",
         **heights,
+        **sphere_statistics.resolve(config, (tile, tile, depth), extent["free_path"]),
     }
 
 
@@ -332,7 +342,7 @@ def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
         heights = {key: own[key] for key in ("z_top", "z_bottom", "base_z")}
         scene = periodic_tile.build(tile, {**heights, "shading": resolved["shading"]}, config.material, config.base)
         scene.info = dict(resolved, spheres=int(count), **heights, **scene.info)
-        return scene
+        return sphere_statistics.add(scene, centres, 1.0, resolved, config, rng)
     all_centres, source = periodic_images(centres, resolved["tile"], resolved["vertex_radius"])
     builder = SceneBuilder(resolved["tile"])
     if resolved["sphere_model"] == "exact":
@@ -342,7 +352,8 @@ def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
     if config.base is not None:
         builder.add_base_plane(resolved["base_z"], config.base)
     info = dict(resolved, spheres=int(count), sphere_images=int(len(all_centres) - count))
-    return builder.build(resolved["z_top"], resolved["z_bottom"], info)
+    return sphere_statistics.add(builder.build(resolved["z_top"], resolved["z_bottom"], info), centres, 1.0, resolved,
+                                 config, rng)
 
 
 def icospheres(centres, rotations, level: int):

@@ -72,6 +72,8 @@ AXIS_LENGTHS = {
     "bounds": "2: a cell's lower and upper bound",
     "realizations": "the realizations (the attribute realizations)",
     "masking_directions": "the directions of the scene's attribute statistics_directions_deg",
+    "pair_bins": "the bins of g(r) between the scene's attribute pair_edges",
+    "chord_bins": "the bins between the scene's attribute chord_edges, and one beyond the last",
 }
 
 #: axes whose length is another's: a covariance's second axis (the loader checks it)
@@ -156,6 +158,16 @@ CORE = (
           ("g1_rays", ("masking_directions", "cells"), "", "shadow rays started on facets of normals in each cell"),
           ("g1_free", ("masking_directions", "cells"), "", "those of them that left the surface: sum(g1_free) / "
            "sum(g1_rays) over the realizations is G1(wo, m)"))),
+    *(Dataset(f"scene/{name}", ("realizations", *axes), unit, f"{doc} (geometry/sphere_statistics.py)",
+              "poisson_spheres and packed_spheres scenes with statistics = true")
+      for name, axes, unit, doc in (
+          ("pair_correlation", ("pair_bins",), "", "each realization's pair correlation g(r) of the sphere centres "
+           "(periodic in x, y and z)"),
+          ("chords", ("chord_bins",), "", "counts of the void's chord lengths in the bulk (from the spheres' exposed "
+           "surface, cosine-weighted), the last bin those beyond the last edge"),
+          ("mean_chord", (), "", "the mean of those chords, in radii"),
+          ("free_path_top", ("incidences", "chord_bins"), "", "counts of the first flight along each wi from the "
+           "plane z = the largest radius to the first sphere, the last bin those beyond the last edge or through"))),
 )
 
 #: the root's coordinates (format 1.1): what xarray shows along the incidences and the cells,

@@ -1,4 +1,5 @@
-"""Statistical bounds on the mean z^2 of a table's cells, shared by the physics tests.
+"""Statistical bounds shared by the physics tests: the mean z^2 of a table's cells, and Hotelling's
+statistic of realizations with correlated bins.
 
 Contract: with R realizations a cell's z = (estimate - truth) / stderr is Student-t with
 R - 1 degrees of freedom; over n cells the mean z^2 lies within :func:`chi2_lower_bound` and
@@ -42,3 +43,27 @@ def mean_z2_interval(n_cells: int, realizations: int, level: float = 0.99) -> tu
     mean, five = _mean_z2(n_cells, realizations)
     half = norm.ppf(0.5 + level / 2) * five / 5
     return mean - half, mean + half
+
+
+def hotelling_f(samples, expected) -> float:
+    """Hotelling's statistic of R realizations' ``samples`` (R, k) against the ``expected`` mean
+    (k,), with the realizations' own covariance: F = (R - k) / (k (R - 1)) T^2, T^2 = R (m -
+    mu)' S^-1 (m - mu). F(k, R - k)-distributed when the realizations are independent and their
+    mean normal (R > k); correlated bins (a histogram's, a g(r)'s) are allowed for."""
+    import numpy as np
+
+    samples = np.asarray(samples, np.float64)
+    r, k = samples.shape
+    if r <= k:
+        raise ValueError(f"hotelling_f: {r} realizations for {k} bins; needs more realizations than bins")
+    gap = samples.mean(axis=0) - np.asarray(expected, np.float64)
+    t2 = r * gap @ np.linalg.solve(np.cov(samples, rowvar=False), gap)
+    return (r - k) / (k * (r - 1)) * t2
+
+
+def hotelling_interval(bins: int, realizations: int, level: float = 0.99) -> tuple[float, float]:
+    """The two-sided ``level`` interval of :func:`hotelling_f`: F(bins, realizations - bins)'s quantiles."""
+    from scipy.stats import f
+
+    tail = 0.5 - level / 2
+    return tuple(float(q) for q in f.ppf([tail, 1.0 - tail], bins, realizations - bins))
