@@ -17,7 +17,8 @@ direction), --paths paths an incidence over --realizations realizations. Per phi
 packed/Boolean albedo ratio at each incidence with its standard error; the chi-square per cell
 of the packed table against the Boolean one order by order (1, 2, 3, 4+) with its two-sided
 bounds; the opposition peak of each kind, f at retro over f at ``PEAK_REFERENCE_DEG`` from it,
-at each incidence with its standard error (the points' covariance); the median |rel| over the
+at each incidence with its standard error (the points' covariance); the void's structure
+(``statistics = true``: the mean chord, the share of short chords, the first flights); the median |rel| over the
 cells with signal of ``lambert_sphere`` (method exact: the radiative-transfer half space of the
 grains) and ``hapke`` (its defaults with the grains' albedo and the scene's volume fraction, and
 with the anisotropic multiple scattering) on each kind; at phi <= 0.1 the finite-size
@@ -28,6 +29,9 @@ albedo given) to each table: the fitted values with their standard errors, chi-s
 of freedom and the fit's median |rel|.
 
     python benchmarks/packing_study.py --part study [--phis 0.1 0.3] [--paths 100000] [--realizations 8] [--fits]
+
+``--part chart``: the study's chart (benchmarks/out/packing_study.png) from the figures ``--part
+study`` wrote: each model's median |rel| against phi on both kinds, and the albedo ratio.
 
 ``--part cost``: one realization of about 10^4 equal spheres (phi = 0.6, tile 64, depth 17): the
 seconds to generate its packing (an empty cache), to read it back, to build its Embree scene and
@@ -127,9 +131,11 @@ def study(args) -> dict:
         for phi in args.phis:
             kinds = {}
             for kind in ("packed_spheres", "poisson_spheres"):
-                kinds[kind], seconds = table(Path(tmp), {"kind": kind, "volume_fraction": phi}, ALBEDOS, args.paths,
-                                             args.cells, args.workers, args.realizations, RETRO_POINTS_DEG)
+                scene = {"kind": kind, "volume_fraction": phi, "statistics": True}
+                kinds[kind], seconds = table(Path(tmp), scene, ALBEDOS, args.paths, args.cells, args.workers,
+                                             args.realizations, RETRO_POINTS_DEG)
                 out[f"{kind} {phi} seconds"] = round(seconds, 1)
+                out[f"{kind} {phi} structure"] = structure(kinds[kind][0])
             for j, c in enumerate(ALBEDOS):
                 packed, boolean = kinds["packed_spheres"][j], kinds["poisson_spheres"][j]
                 ratio = packed.albedo / boolean.albedo
@@ -168,6 +174,25 @@ def study(args) -> dict:
                 out[f"phi {phi}, c {c}"] = row
                 print(f"phi {phi}, c {c}: {row}", flush=True)
     return out
+
+
+def structure(t) -> dict:
+    """The void's measured structure (scene/ of a table with statistics): the mean chord over the
+    realizations with its standard error, in free paths of the scene (scene/free_path); the share
+    of chords shorter than a quarter of it (an exponential law's: 1 - exp(-1/4) = 0.221); and the
+    mean first flight from the top at each incidence, from the bins' centres, in free paths."""
+    scene, free = t.arrays, float(t.scene["free_path"])
+    edges = np.asarray(t.scene["chord_edges"])
+    centres = np.append(0.5 * (edges[:-1] + edges[1:]), edges[-1])  # those beyond: at the last edge
+    means = scene["scene/mean_chord"]
+    chords = scene["scene/chords"].sum(axis=0)
+    short = chords[:len(edges) - 1][edges[1:] <= 0.25 * free + 1e-12].sum() / chords.sum()
+    top = scene["scene/free_path_top"].sum(axis=0)
+    return {"mean chord / l": [round(float(means.mean()) / free, 4),
+                               round(float(means.std(ddof=1) / np.sqrt(len(means))) / free, 4)],
+            "chords under l/4": round(float(short), 4),
+            "mean first flight / l": np.round(top @ centres / top.sum(axis=1) / free, 3).tolist(),
+            "free path l": round(free, 4)}
 
 
 def opposition_peak(t) -> tuple[np.ndarray, np.ndarray]:
@@ -211,9 +236,46 @@ def cost(args) -> dict:
     return out
 
 
+def chart(args) -> dict:
+    """The study's chart from its figures (benchmarks/out/packing_study_study.json): each model's
+    median |rel| against phi on packed (solid) and Boolean (dashed) tables, per albedo; and the
+    albedo ratio packed / Boolean against phi at normal and 80 deg incidence, with its errors."""
+    import json
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from report import OUT
+
+    figures = json.loads((OUT / "packing_study_study.json").read_text())["study"]
+    phis = sorted({float(key.split()[1].rstrip(",")) for key in figures if key.startswith("phi ")})
+    rows = {(phi, c): figures[f"phi {phi}, c {c}"] for phi in phis for c in ALBEDOS}
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for label, colour in zip(MODELS, ("tab:blue", "tab:orange", "tab:green")):
+        for c, marker in zip(ALBEDOS, "o^s"):
+            for kind, style in (("packed", "-"), ("Boolean", "--")):
+                left.plot(phis, [100 * rows[phi, c][f"{label} on {kind}: median |rel|"] for phi in phis], style,
+                          marker=marker, color=colour, ms=4, label=f"{label}, c {c}" if kind == "packed" else None)
+    left.set(xlabel="volume fraction phi", ylabel="median |rel| over the cells, %",
+             title="models on packed (solid) and Boolean (dashed) spheres")
+    left.legend(fontsize=6.5, ncol=3)
+    for c, marker in zip(ALBEDOS, "o^s"):
+        for j, colour in ((0, "tab:purple"), (3, "tab:red")):
+            right.errorbar(phis, [rows[phi, c]["albedo ratio packed / Boolean"][j] for phi in phis],
+                           yerr=[rows[phi, c]["its stderr"][j] for phi in phis], marker=marker, ms=4, color=colour,
+                           capsize=2, label=f"theta_i {THETA_I[j]:g} deg, c {c}")
+    right.axhline(1.0, color="grey", lw=0.8)
+    right.set(xlabel="volume fraction phi", ylabel="albedo, packed / Boolean", title="packed against Boolean")
+    right.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(OUT / "packing_study.png", dpi=110)
+    return {"chart": str(OUT / "packing_study.png")}
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--part", choices=["dilute", "study", "cost"], default="dilute")
+    parser.add_argument("--part", choices=["dilute", "study", "cost", "chart"], default="dilute")
     parser.add_argument("--phis", type=float, nargs="+", default=[0.01, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
     parser.add_argument("--realizations", type=int, default=8)
     parser.add_argument("--fits", action="store_true", help="fit hapke and vmf_diffuse to every table (study)")
@@ -222,7 +284,7 @@ def main():
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
     args = parser.parse_args()
-    figures = {args.part: {"dilute": dilute, "study": study, "cost": cost}[args.part](args)}
+    figures = {args.part: {"dilute": dilute, "study": study, "cost": cost, "chart": chart}[args.part](args)}
     save_figures(figures, f"packing_study_{args.part}", args.json)
 
 
