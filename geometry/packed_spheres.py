@@ -10,14 +10,24 @@ Radii: 1 (``radius_sigma = 0``), or lognormal of mean 1 and shape ``radius_sigma
 r = exp(sigma z - sigma^2 / 2) with z a standard normal clipped at 4 (every value used is
 recorded). The count is the volume fraction's: n = phi tile^2 depth / (4/3 pi E[r^3]),
 E[r^3] = exp(3 sigma^2); the packer scales the radii by one common factor to the volume fraction
-exactly (``mean_radius`` records it per realization).
+exactly (``mean_radius`` records it per realization; with few spheres it is not 1: 1.006 for the
+24 of ``EXAMPLE``), so the slab's top ``z_top``, its bottom and the base lie ``SLAB_MARGIN``
+beyond each realization's largest sphere, stored per realization.
 
 Defaults, by the Boolean scene's rules with a packing's free path: the mean chord of the void
 of any two-phase medium is 4 (1 - phi) / S_v, S_v = 3 phi E[r^2] / E[r^3] the spheres' area per
 volume, so l = 4 (1 - phi) exp(2 sigma^2) / (3 phi) (Boolean spheres: 4 / (-3 ln(1 - phi)), the
 same to first order in phi); ``depth`` = tau l, tau as the Boolean scene's; ``tile`` = 64 radii.
 
-The spheres are exact (Embree's native spheres), traced by the direct backend.
+By default the spheres are exact (Embree's native spheres), traced by the direct backend. Given
+``subdivisions`` or ``mesh_error``, or on the embreex backend (which traces triangles only:
+``mesh_error`` FALLBACK_MESH_ERROR, said in the table), each sphere is an icosphere rotated at
+random, scaled to its sphere's area 4 pi r^2 (the mean chord stays exact, by Cauchy's formula),
+its hits projected onto the sphere of the mesh's vertex radius and shaded with the sphere's
+normal, as the Boolean scene's icospheres are; the rotations are drawn after the packing, so
+both models pack the same spheres for the same seed. An icosphere's vertices lie outside its
+sphere (by max_mesh_error at most, in its radii), so the meshes of spheres in contact overlap
+there, as a Boolean scene's spheres do: the tracer passes through the back faces it meets.
 """
 
 from __future__ import annotations
@@ -29,15 +39,23 @@ from typing import Literal
 import numpy as np
 import pydantic
 from pydantic import Field
+from scipy.spatial.transform import Rotation
 
 from microsim.core.schema import Section
 from microsim.geometry import packings, sphere_statistics, surface_statistics
 from microsim.geometry.poisson_spheres import (
     EXACT_SPHERE_BYTES,
+    MAX_SUBDIVISIONS,
     MIN_EXPECTED_OBJECTS,
     SLAB_MARGIN,
+    TRIANGLE_BYTES,
+    add_icospheres,
+    is_exact,
+    level_for,
+    meshed_on_embreex,
     periodic_images,
     slab,
+    unit_icosphere,
 )
 from microsim.tracer.scene import Scene, SceneBuilder
 
@@ -58,8 +76,6 @@ MAX_SIGMA = 0.5
 CLIP = 4.0
 #: the tile spans at least this many of the largest sphere's diameters
 MIN_TILE_DIAMETERS = 4.0
-#: the one line that refuses the embreex backend (it traces triangles only)
-REFUSED_BACKEND = "run.backend = 'embreex': packed_spheres are exact spheres, traced by the direct backend"
 #: the largest packing a realization generates
 MAX_SPHERES = 200_000
 
@@ -74,6 +90,9 @@ class Config(Section):
     tile: float | None = Field(None, ge=4.0, le=1e4, description="tile period, in radii")
     cache: str | None = Field(None, description="directory of generated packings (default: $MICROSIM_CACHE/packings, "
                               "else ~/.cache/microsim/packings)")
+    subdivisions: int | None = Field(None, ge=0, le=MAX_SUBDIVISIONS, description="icosphere level")
+    mesh_error: float | None = Field(None, gt=0.0, le=0.5, description="largest mesh-to-sphere distance, in the "
+                                     "sphere's radii")
     statistics: bool = sphere_statistics.statistics_key()
     statistics_rays: int | None = sphere_statistics.rays_key()
 
@@ -90,8 +109,8 @@ def largest_radius(sigma: float) -> float:
 
 def check(config) -> None:
     scene = config.scene
-    if config.run.backend == "embreex":
-        raise ValueError(REFUSED_BACKEND)
+    if scene.subdivisions is not None and scene.mesh_error is not None:
+        raise ValueError("scene.subdivisions, scene.mesh_error: give one of them, not both")
     resolved = resolve(config)
     smallest = MIN_TILE_DIAMETERS * 2.0 * resolved["largest_radius"]
     if resolved["tile"] < smallest:
@@ -116,10 +135,9 @@ def cache_directory(config) -> Path:
 
 
 def for_backend(config, backend: str):
-    """(config, note): exact spheres only, which the direct backend traces."""
-    if backend == "embreex":
-        raise ValueError(REFUSED_BACKEND)
-    return config, ""
+    """(config, note): the config as ``backend`` can trace it: on embreex exact spheres become
+    icospheres (module doc)."""
+    return meshed_on_embreex(config, backend, "spheres")
 
 
 def free_path(phi: float, sigma: float) -> float:
@@ -140,19 +158,27 @@ def resolve(config) -> dict:
         "largest_radius": top,
         **extent,
         "expected_spheres": phi * tile * tile * depth / (4.0 / 3.0 * math.pi * math.exp(3.0 * sigma * sigma)),
-        "sphere_model": "exact",
-        "triangles_per_sphere": 0,
+        **sphere_model(scene),
         "packer": packings.PROTOCOL,
         "base": config.base.kind if config.base is not None else "none",
-        "base_z": -depth - top,
-        "z_top": top + SLAB_MARGIN,
-        "z_bottom": -depth - top - SLAB_MARGIN,
         **sphere_statistics.resolve(config, (tile, tile, depth), extent["free_path"]),
     }
 
 
+def sphere_model(scene) -> dict:
+    """The spheres' model as the table records it: exact, or the icospheres' level, triangles,
+    vertex radius and largest distance to the sphere (in its radii)."""
+    if is_exact(scene):
+        return {"sphere_model": "exact", "triangles_per_sphere": 0, "vertex_radius": 1.0, "max_mesh_error": 0.0}
+    level = scene.subdivisions if scene.subdivisions is not None else level_for(scene.mesh_error)
+    _, faces, vertex_radius, error = unit_icosphere(level)
+    return {"sphere_model": "icosphere", "subdivisions": level, "triangles_per_sphere": len(faces),
+            "vertex_radius": vertex_radius, "max_mesh_error": error}
+
+
 def scene_bytes(resolved: dict) -> int:
-    return int((resolved["expected_spheres"] + 1.0) * EXACT_SPHERE_BYTES)
+    per_sphere = resolved["triangles_per_sphere"] * TRIANGLE_BYTES or EXACT_SPHERE_BYTES
+    return int((resolved["expected_spheres"] + 1.0) * per_sphere)
 
 
 def draw(resolved: dict, rng: np.random.Generator, cache: Path) -> packings.Packing:
@@ -167,16 +193,32 @@ def draw(resolved: dict, rng: np.random.Generator, cache: Path) -> packings.Pack
     return packed._replace(centres=packed.centres - np.array([0.0, 0.0, depth]))
 
 
+def slab_heights(radii: np.ndarray, resolved: dict) -> dict:
+    """The realization's top, bottom and base heights: SLAB_MARGIN beyond its largest sphere (the
+    packer's common scale of the radii differs a little between realizations: per realization)."""
+    top = float(radii.max()) * resolved["vertex_radius"]
+    depth = resolved["depth"]
+    return {"z_top": top + SLAB_MARGIN, "z_bottom": -depth - top - SLAB_MARGIN, "base_z": -depth - top}
+
+
 def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
     packed = draw(resolved, rng, cache_directory(config))
-    all_centres, source = periodic_images(packed.centres, resolved["tile"], resolved["largest_radius"])
+    heights = slab_heights(packed.radii, resolved)
+    reach = float(packed.radii.max()) * resolved["vertex_radius"]
+    all_centres, source = periodic_images(packed.centres, resolved["tile"], reach)
     builder = SceneBuilder(resolved["tile"])
-    builder.add_spheres(all_centres, packed.radii[source], config.material)
+    if resolved["sphere_model"] == "exact":
+        builder.add_spheres(all_centres, packed.radii[source], config.material)
+    else:
+        rotations = Rotation.random(len(packed.centres), random_state=rng).as_matrix()
+        add_icospheres(builder, all_centres, rotations[source], resolved["subdivisions"], config.material,
+                       packed.radii[source])
     if config.base is not None:
-        builder.add_base_plane(resolved["base_z"], config.base)
+        builder.add_base_plane(heights["base_z"], config.base)
     volume = resolved["tile"] ** 2 * resolved["depth"]
-    info = dict(resolved, spheres=len(packed.centres), sphere_images=int(len(all_centres) - len(packed.centres)),
+    info = dict(resolved, **heights, spheres=len(packed.centres),
+                sphere_images=int(len(all_centres) - len(packed.centres)),
                 measured_volume_fraction=float(np.sum(4.0 / 3.0 * math.pi * packed.radii**3) / volume),
                 mean_radius=float(packed.radii.mean()), shrink=packed.shrink)
-    return sphere_statistics.add(builder.build(resolved["z_top"], resolved["z_bottom"], info), packed.centres,
+    return sphere_statistics.add(builder.build(heights["z_top"], heights["z_bottom"], info), packed.centres,
                                  packed.radii, resolved, config, rng)

@@ -356,21 +356,25 @@ def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
                                  config, rng)
 
 
-def icospheres(centres, rotations, level: int):
-    """(vertices (V, 3) float64, faces (F, 3)): the icospheres of area 4 pi of ``level`` rotated by
-    ``rotations`` about ``centres``, one after the other, as every icosphere scene lays them."""
+def icospheres(centres, rotations, level: int, radii=1.0):
+    """(vertices (V, 3) float64, faces (F, 3)): the icospheres of area 4 pi r^2 of ``level`` rotated
+    by ``rotations`` about ``centres`` (radii r: one, or one a sphere), one after the other, as
+    every icosphere scene lays them."""
     vertices0, faces0, _, _ = unit_icosphere(level)
-    vertices = np.einsum("sij,vj->svi", rotations, vertices0) + centres[:, None, :]
+    scale = np.broadcast_to(np.asarray(radii, np.float64), (len(centres),))[:, None, None]
+    vertices = scale * np.einsum("sij,vj->svi", rotations, vertices0) + centres[:, None, :]
     faces = faces0[None, :, :] + (np.arange(len(centres)) * len(vertices0))[:, None, None]
     return vertices.reshape(-1, 3), faces.reshape(-1, 3)
 
 
-def add_icospheres(builder: SceneBuilder, centres, rotations, level: int, material) -> None:
-    """Rotated icospheres of area 4 pi about ``centres``, shaded as spheres of the vertex radius."""
+def add_icospheres(builder: SceneBuilder, centres, rotations, level: int, material, radii=1.0) -> None:
+    """Rotated icospheres of area 4 pi r^2 about ``centres`` (radii r: one, or one a sphere),
+    shaded as spheres of the vertex radius (times r)."""
     _, faces0, vertex_radius, _ = unit_icosphere(level)
-    vertices, faces = icospheres(centres, rotations, level)
+    vertices, faces = icospheres(centres, rotations, level, radii)
     face_shape = np.repeat(np.arange(len(centres), dtype=np.int32), len(faces0))
-    builder.add(vertices, faces, face_shape, Shapes.spheres(centres, 1.0, vertex_radius), material)
+    radii = np.broadcast_to(np.asarray(radii, np.float64), (len(centres),))
+    builder.add(vertices, faces, face_shape, Shapes.spheres(centres, radii, vertex_radius * radii), material)
 
 
 def tile_of(resolved: dict, centres, rotations) -> Tile:

@@ -2,7 +2,8 @@
 images), the volume fraction is the one asked for, the lognormal radii have their sigma, a
 packing is generated once per key and read back from the cache, a table is the same on two
 workers, from an empty cache and after a resume, the table is reciprocal at 28 pairs of
-incidences, and bad input is refused in one line. (The white furnace, reciprocity, thread identity and a bad key: tests/test_scene_kinds.py.)"""
+incidences, the embreex backend traces icospheres as the direct one does, and bad input is
+refused in one line. (The white furnace, reciprocity, thread identity and a bad key: tests/test_scene_kinds.py.)"""
 
 import math
 import time
@@ -65,6 +66,25 @@ def test_no_two_spheres_overlap_and_the_volume_fraction_is_the_one_asked_for(phi
         assert ratio >= 1.0
         measured = np.sum(4 / 3 * math.pi * packing.radii**3) / (16 * 16 * 12)
         assert abs(measured / phi - 1.0) < 0.005
+
+
+def test_the_slab_holds_every_sphere_and_its_periodic_images():
+    """The example's realizations (24 spheres, their radii scaled to 1.006 by the packer): the
+    slab's top and bottom beyond the largest sphere of a centre at z = 0 or -depth, and every
+    sphere that reaches across a side of the tile there again through its image."""
+    cfg = config.validate(example("packed_spheres"))
+    resolved = PACKED.resolve(cfg)
+    for realization in range(2):
+        scene = PACKED.generate(resolved, cfg, geometry_rng(1, realization))
+        packing = packed(cfg, realization)
+        assert packing.radii.max() > 1.001
+        # centres lie anywhere in -depth <= z < 0: the slab clears the largest sphere at either end
+        assert scene.info["z_top"] > packing.radii.max()
+        assert scene.info["z_bottom"] < -resolved["depth"] - packing.radii.max()
+        tile = resolved["tile"]
+        crossing = np.any((packing.centres[:, :2] < packing.radii[:, None])
+                          | (packing.centres[:, :2] > tile - packing.radii[:, None]), axis=1)
+        assert scene.info["sphere_images"] >= crossing.sum() > 0
 
 
 def test_lognormal_radii_have_their_sigma_and_do_not_overlap():
@@ -149,12 +169,28 @@ def test_a_packing_is_reciprocal_at_28_pairs_and_the_check_sees_what_is_not(tmp_
     ('kind = "packed_spheres"\nvolume_fraction = 0.3\ntile = 6.0', "scene.tile", ("8",)),
     ('kind = "packed_spheres"\nvolume_fraction = 0.3\ntile = 8.0\ndepth = 4.0\ncache = "/proc/no_cache"',
      "packing cache", ("/proc/no_cache",)),
+    ('kind = "packed_spheres"\nvolume_fraction = 0.3\ntile = 8.0\ndepth = 4.0\nsubdivisions = 1\nmesh_error = 0.01',
+     "scene.subdivisions", ("not both",)),
 ], ids=["beyond the packer's reach", "too wide a size distribution", "a tile of too few diameters",
-        "a tile of too few diameters of equal spheres", "a cache that cannot be written"])
+        "a tile of too few diameters of equal spheres", "a cache that cannot be written",
+        "two icosphere budgets"])
 def test_bad_input_is_refused_in_one_line_and_nothing_is_written(scene, key, also, tmp_path, capsys):
     assert_run_refused(small_config(scene), key, tmp_path, capsys, *also)
 
 
-def test_the_embreex_backend_is_refused_naming_the_key(tmp_path, capsys):
-    text = small_config('kind = "packed_spheres"\nvolume_fraction = 0.3\ntile = 8.0\ndepth = 4.0')
-    assert_run_refused(text + 'backend = "embreex"\n', "run.backend", tmp_path, capsys, "direct")
+def test_on_embreex_the_spheres_are_icospheres_that_trace_the_paths_the_direct_backend_traces():
+    """The example on the embreex backend: traced as icospheres within mesh_error 0.01 (said in the
+    plan's note), the same paths as the direct backend traces on the same icospheres (the counts
+    of segments, inside hits and kills equal; every estimate to 1e-12); and the icospheres pack the
+    same spheres as the exact scene (one packing generated a realization for both)."""
+    data = example("packed_spheres")
+    on_embreex = config.validate({**data, "run": {**data["run"], "backend": "embreex"}})
+    plan = Plan.from_config(on_embreex)
+    assert plan.scene["sphere_model"] == "icosphere" and "icospheres within mesh_error 0.01" in plan.backend_note
+    meshed = config.validate({**data, "scene": {**data["scene"], "mesh_error": 0.01}})
+    before = packings.GENERATED[0]
+    old, new = trace(on_embreex), trace(meshed)
+    assert packings.GENERATED[0] - before <= data["run"]["realizations"]
+    assert np.array_equal(old.counts, new.counts) and old.counts[:, 0].sum() > 0
+    for a, b in zip(old.brdf + old.albedo + old.energy, new.brdf + new.albedo + new.energy):
+        assert np.allclose(a.mean, b.mean, rtol=1e-12, atol=1e-15)
