@@ -33,12 +33,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from report import save_figures  # noqa: E402
-from throughput import fused_trace, load, realization, replay, replay_direct  # noqa: E402
+from throughput import fused_trace, grid_trace, load, realization, replay, replay_direct  # noqa: E402
 
 from microsim.core.tally import SEGMENTS  # noqa: E402
 from microsim.physics.rng import stream_key  # noqa: E402
 from microsim.testing import trace
-from microsim.tracer.estimators import DEFAULT, build, setups  # noqa: E402
 from microsim.tracer.integrators.grid import GridBackend, walk  # noqa: E402
 from microsim.tracer.integrators.records import Beam  # noqa: E402
 from microsim.tracer.sensor import Sensor  # noqa: E402
@@ -54,16 +53,6 @@ def walk_all(grid, origins, directions, tfar, out):
         out[r] = t if face >= 0 else -1.0
 
 
-def grid_trace(scene, sensor, beam, threads: int):
-    """(seconds, tally) of the grid backend tracing ``beam``."""
-    estimators = build(DEFAULT, sensor)
-    backend = GridBackend(scene, estimators, threads)
-    kernel_setups = setups(estimators, beam.wi, 0.0)
-    start = time.perf_counter()
-    tally = backend.trace(beam, scene.arrays(), kernel_setups)
-    return time.perf_counter() - start, tally
-
-
 def measure(cfg, paths: int, repeats: int) -> dict:
     """Figures 1-3 of the module doc at each incidence of ``cfg``."""
     _, plan, scene = realization(cfg)
@@ -76,10 +65,10 @@ def measure(cfg, paths: int, repeats: int) -> dict:
         wi = np.asarray(plan.incidence_direction(k), np.float64)
         warm = Beam(wi, np.uint64(0), 200, 0)
         fused_trace(scene, sensor, warm, 1, log_rays=1)
-        grid_trace(grid_scene, sensor, warm, 1)
+        grid_trace(grid_scene, sensor, warm, 1, GridBackend)
         beam = Beam(wi, np.uint64(stream_key(cfg.run.seed, 0, k)), paths, 0)
         embree_runs = [fused_trace(scene, sensor, beam, 1) for _ in range(repeats)]
-        grid_runs = [grid_trace(grid_scene, sensor, beam, 1) for _ in range(repeats)]
+        grid_runs = [grid_trace(grid_scene, sensor, beam, 1, GridBackend) for _ in range(repeats)]
         segments = int(embree_runs[0][1].counts[SEGMENTS])
         grid_segments = int(grid_runs[0][1].counts[SEGMENTS])
         logger = fused_trace(scene, sensor, beam, 1, log_rays=segments)[2]

@@ -21,9 +21,16 @@ measured side by side in one run, best of --repeats:
    (Order matters: the same rays shuffled run 1.5 times slower in Embree.) On a micrograin
    scene, also ``direct_ratio_absorbing``: that ratio with grains and base absorbing, the
    kernel's floor (a path is its start, one query and one absorption).
-3. whole runs, builds included (--run-paths per incidence, 8 realizations, all the run's
+3. the sphere grid (``intersector = "grid"``, microsim/tracer/integrators/sphere_grid.py; sphere
+   scenes only) on the same exact spheres, the cells built from the same realization: segments/s
+   with 1 and 2 threads, ``grid_over_direct_per_thread`` (segments/s on one thread against the
+   direct backend's), the walk alone replayed on the direct backend's logged queries (ns a query,
+   beside raw direct Embree's on the same rays: ``grid_walk_ns_per_query``) and the tracer's time
+   beyond the walk (``grid_outside_walk_ns_per_segment``).
+4. whole runs, builds included (--run-paths per incidence, 8 realizations, all the run's
    incidences: 4 on the spheres and grains, 5 on the heightfield): old backend with 1 and 2
-   worker processes, new backend with 1 and 2 threads, alternated.
+   worker processes, new backend (Embree's spheres) with 1 and 2 threads, and on sphere scenes
+   the sphere grid with 1 and 2 threads, alternated.
 
 A triangle scene (``kind = "heightfield"``, or ``"mesh"`` given with --scenes) has nothing to
 tessellate: both backends trace the same realization's triangles (``spheres`` is 0), so the raw
@@ -67,6 +74,7 @@ import numpy as np
 
 from microsim import config as config_module
 from microsim.core.tally import SEGMENTS
+from microsim.geometry import sphere_cells
 from microsim.physics.rng import geometry_rng, stream_key
 from microsim.run.plan import Plan
 from microsim.testing import trace
@@ -74,6 +82,7 @@ from microsim.tracer.estimators import DEFAULT, build, setups
 from microsim.tracer.integrators.direct import DirectBackend
 from microsim.tracer.integrators.embreex import EmbreexBackend, embree_scene
 from microsim.tracer.integrators.records import Beam
+from microsim.tracer.integrators.sphere_grid import SphereGridBackend, first_hits
 from microsim.tracer.sensor import Sensor
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -160,6 +169,31 @@ def fused_trace(scene, sensor, beam, threads: int, log_rays: int = 0):
     return time.perf_counter() - start, tally, backend
 
 
+def grid_trace(scene, sensor, beam, threads: int, backend_class=SphereGridBackend):
+    """(seconds, tally) of a grid backend (the sphere grid unless told) tracing ``beam`` through
+    ``scene`` (its ``grid`` set)."""
+    estimators = build(DEFAULT, sensor)
+    backend = backend_class(scene, estimators, threads)
+    kernel_setups = setups(estimators, beam.wi, 0.0)
+    start = time.perf_counter()
+    tally = backend.trace(beam, scene.arrays(), kernel_setups)
+    return time.perf_counter() - start, tally
+
+
+def replay_walk(cells, logger) -> float:
+    """Seconds the sphere grid's walk takes on the queries of ``logger``, in their order."""
+    log = [np.ascontiguousarray(c) for c in (logger.ray_log[:, :3], logger.ray_log[:, 3:6], logger.ray_log[:, 6])]
+    first_hits(cells, *(c[:10] for c in log))  # compiled (or loaded) before the clock
+    start = time.perf_counter()
+    first_hits(cells, *log)
+    return time.perf_counter() - start
+
+
+def gridded(cfg) -> bool:
+    """Whether the scene's exact spheres can be walked by the sphere grid (``intersector``)."""
+    return "intersector" in type(cfg.scene).model_fields and tessellated(cfg)
+
+
 def measure_scene(cfg, paths: int, repeats: int) -> dict:
     """Figures 1 and 2 of the module docstring for one config."""
     sensor = Sensor.build(cfg.sensor.cells)
@@ -172,6 +206,10 @@ def measure_scene(cfg, paths: int, repeats: int) -> dict:
     replay(wavefront_trace(mesh, sensor, embreex, warm)[2].batches, embreex)
     _, _, logger = fused_trace(exact, sensor, warm, 1, log_rays=1)
     logger.embree.intersect(logger.ray_log[:, :3], logger.ray_log[:, 3:6], logger.ray_log[:, 6])
+    grid = gridded(cfg)
+    if grid:
+        exact.grid = sphere_cells.build(exact, plan.scene["free_path"])
+        grid_trace(exact, sensor, warm, 1)
     best = {}
     for k in range(repeats):
         b = Beam(np.asarray(wi, np.float64), np.uint64(stream_key(cfg.run.seed, 0, k)), paths, 0)
@@ -186,6 +224,11 @@ def measure_scene(cfg, paths: int, repeats: int) -> dict:
         new_segments = int(fused_tally.counts[SEGMENTS])
         _, _, logger = fused_trace(exact, sensor, b, 1, log_rays=new_segments)
         best["raw_direct"] = min(best.get("raw_direct", np.inf), replay_direct(logger))
+        if grid:
+            for threads in (1, 2):
+                seconds, grid_tally = grid_trace(exact, sensor, b, threads)
+                best[f"grid_{threads}"] = min(best.get(f"grid_{threads}", np.inf), seconds)
+            best["walk"] = min(best.get("walk", np.inf), replay_walk(exact.grid, logger))
     out.update({
         "old_segments": old_segments, "new_segments": new_segments,
         "raw_embreex_rays_per_s": old_segments / best["raw_embreex"],
@@ -199,6 +242,17 @@ def measure_scene(cfg, paths: int, repeats: int) -> dict:
         out[f"new_paths_per_s_{threads}_threads"] = paths / best[f"new_{threads}"]
     out["direct_ratio_per_thread"] = out["new_segments_per_s_1_threads"] / out["raw_direct_rays_per_s"]
     out["direct_outside_embree_ns_per_segment"] = (best["new_1"] - best["raw_direct"]) / new_segments * 1e9
+    if grid:
+        grid_segments = int(grid_tally.counts[SEGMENTS])
+        out["grid_cells"] = int(np.prod(exact.grid.counts))
+        out["grid_cell_side"] = float(exact.grid.side.min())
+        for threads in (1, 2):
+            out[f"grid_segments_per_s_{threads}_threads"] = grid_segments / best[f"grid_{threads}"]
+        out["grid_over_direct_per_thread"] = out["grid_segments_per_s_1_threads"] / out["new_segments_per_s_1_threads"]
+        out["grid_walk_ns_per_query"] = best["walk"] / new_segments * 1e9
+        out["grid_outside_walk_ns_per_segment"] = (best["grid_1"] / grid_segments - best["walk"] / new_segments) * 1e9
+        out["grid_ns_per_segment"] = best["grid_1"] / grid_segments * 1e9
+        out["direct_ns_per_segment"] = best["new_1"] / new_segments * 1e9
     return out
 
 
@@ -228,6 +282,9 @@ def measure_runs(cfg, run_paths: int, repeats: int) -> dict:
     old_cfg = old_cfg.model_copy(update={"run": old_cfg.run.model_copy(update={"backend": "embreex"})})
     ways = {"old_1_worker": (old_cfg, 1, 1), "old_2_workers": (old_cfg, 2, 1),
             "new_1_thread": (cfg, 1, 1), "new_2_threads": (cfg, 1, 2)}
+    if gridded(cfg):
+        grid_cfg = cfg.model_copy(update={"scene": cfg.scene.model_copy(update={"intersector": "grid"})})
+        ways.update({"grid_1_thread": (grid_cfg, 1, 1), "grid_2_threads": (grid_cfg, 1, 2)})
     best = dict.fromkeys(ways, np.inf)
     for _ in range(repeats):
         for name, (c, workers, threads) in ways.items():
@@ -242,9 +299,12 @@ def load(run: str, run_paths: int):
     """runs/RUN.toml with --run-paths and 8 realizations; a heightfield's NDF and masking
     measurements (``statistics``: shadow rays at scene generation, not tracing) turned off, and
     its triangles met by Embree (``intersector = "triangles"``: this benchmark measures the
-    tracer against Embree; benchmarks/heightfield_tracing.py, the grid walk against both)."""
+    tracer against Embree; benchmarks/heightfield_tracing.py, the grid walk against both);
+    spheres met by Embree too (``intersector = "embree"``; the sphere grid is figure 3's)."""
     overrides = {"run.paths": run_paths, "run.realizations": 8}
     cfg = config_module.load(ROOT / "runs" / f"{run}.toml", overrides)
+    if gridded(cfg):
+        cfg = config_module.load(ROOT / "runs" / f"{run}.toml", {**overrides, "scene.intersector": "embree"})
     if cfg.scene.kind == "heightfield":
         cfg = config_module.load(ROOT / "runs" / f"{run}.toml",
                                  {**overrides, "scene.statistics": False, "scene.intersector": "triangles"})
@@ -272,6 +332,11 @@ def main():
         figures["speedup_2_threads"] = figures["run_paths_per_s_new_2_threads"] / figures["run_paths_per_s_new_1_thread"]
         figures["new_2_threads_over_old_2_workers"] = (figures["run_paths_per_s_new_2_threads"]
                                                        / figures["run_paths_per_s_old_2_workers"])
+        if "run_paths_per_s_grid_1_thread" in figures:
+            figures["grid_speedup_2_threads"] = (figures["run_paths_per_s_grid_2_threads"]
+                                                 / figures["run_paths_per_s_grid_1_thread"])
+            figures["grid_over_new_run_1_thread"] = (figures["run_paths_per_s_grid_1_thread"]
+                                                     / figures["run_paths_per_s_new_1_thread"])
         label = scene_label(run)
         scenes[label] = figures
         report(label, figures)
@@ -315,6 +380,14 @@ def report(label: str, f: dict) -> None:
     print(f"  new, 1 thread / raw direct on the same rays: {f['direct_ratio_per_thread']:.3f}, outside Embree "
           f"{f['direct_outside_embree_ns_per_segment']:.1f} ns/segment (raw direct "
           f"{1e9 / f['raw_direct_rays_per_s']:.1f} ns/ray)")
+    if "grid_over_direct_per_thread" in f:
+        print(f"  sphere grid ({f['grid_cells']} cells of {f['grid_cell_side']:.2f} r) 1 thr "
+              f"{f['grid_segments_per_s_1_threads'] / 1e6:6.3f}, 2 thr {f['grid_segments_per_s_2_threads'] / 1e6:6.3f} "
+              f"M segments/s; over the direct backend a thread: x{f['grid_over_direct_per_thread']:.2f} "
+              f"({f['grid_ns_per_segment']:.0f} against {f['direct_ns_per_segment']:.0f} ns/segment)")
+        print(f"  the walk alone {f['grid_walk_ns_per_query']:.0f} ns/query against raw direct Embree "
+              f"{1e9 / f['raw_direct_rays_per_s']:.0f} ns/ray on the same queries; beyond the walk "
+              f"{f['grid_outside_walk_ns_per_segment']:.0f} ns/segment")
     if "direct_ratio_absorbing" in f:
         print(f"  the same with every surface absorbing (start, one query, absorb): {f['direct_ratio_absorbing']:.3f}")
     print(f"  whole runs (k paths/s): old 1 worker {f['run_paths_per_s_old_1_worker'] / 1e3:.1f}, "
@@ -322,6 +395,10 @@ def report(label: str, f: dict) -> None:
           f"new 1 thread {f['run_paths_per_s_new_1_thread'] / 1e3:.1f}, 2 threads "
           f"{f['run_paths_per_s_new_2_threads'] / 1e3:.1f} (x{f['speedup_2_threads']:.2f}); "
           f"new 2 threads / old 2 workers = {f['new_2_threads_over_old_2_workers']:.2f}")
+    if "grid_speedup_2_threads" in f:
+        print(f"  whole runs on the sphere grid (k paths/s): 1 thread {f['run_paths_per_s_grid_1_thread'] / 1e3:.1f} "
+              f"(x{f['grid_over_new_run_1_thread']:.2f} the new backend's), 2 threads "
+              f"{f['run_paths_per_s_grid_2_threads'] / 1e3:.1f} (x{f['grid_speedup_2_threads']:.2f})")
 
 
 def chart(scenes: dict) -> None:
@@ -337,16 +414,21 @@ def chart(scenes: dict) -> None:
     bars = [("raw embreex (triangles)", "raw_embreex_rays_per_s"), ("old backend, 1 thread", "old_segments_per_s"),
             ("raw direct (spheres; heightfield: triangles)", "raw_direct_rays_per_s"),
             ("new backend, 1 thread", "new_segments_per_s_1_threads"),
-            ("new backend, 2 threads", "new_segments_per_s_2_threads")]
+            ("new backend, 2 threads", "new_segments_per_s_2_threads"),
+            ("sphere grid, 1 thread", "grid_segments_per_s_1_threads"),
+            ("sphere grid, 2 threads", "grid_segments_per_s_2_threads")]
     for k, (label, key) in enumerate(bars):
-        left.bar(x + (k - 2) * 0.16, [scenes[p][key] / 1e6 for p in phis], 0.16, label=label)
+        left.bar(x + (k - 3) * 0.12, [scenes[p].get(key, 0.0) / 1e6 for p in phis], 0.12, label=label)
     left.set_ylabel("M rays or segments / s")
-    left.set_ylim(top=1.3 * max(scenes[p]["new_segments_per_s_2_threads"] for p in phis) / 1e6)
+    left.set_ylim(top=1.3 * max(max(scenes[p]["new_segments_per_s_2_threads"], scenes[p].get(
+        "grid_segments_per_s_2_threads", 0.0)) for p in phis) / 1e6)
     left.set_title("segments per second against raw Embree, same rays")
     runs = [("old, 1 worker", "run_paths_per_s_old_1_worker"), ("old, 2 workers", "run_paths_per_s_old_2_workers"),
-            ("new, 1 thread", "run_paths_per_s_new_1_thread"), ("new, 2 threads", "run_paths_per_s_new_2_threads")]
+            ("new, 1 thread", "run_paths_per_s_new_1_thread"), ("new, 2 threads", "run_paths_per_s_new_2_threads"),
+            ("sphere grid, 1 thread", "run_paths_per_s_grid_1_thread"),
+            ("sphere grid, 2 threads", "run_paths_per_s_grid_2_threads")]
     for k, (label, key) in enumerate(runs):
-        right.bar(x + (k - 1.5) * 0.2, [scenes[p][key] / 1e3 for p in phis], 0.2, label=label)
+        right.bar(x + (k - 2.5) * 0.14, [scenes[p].get(key, 0.0) / 1e3 for p in phis], 0.14, label=label)
     right.set_ylabel("k paths / s (whole runs, builds included)")
     right.set_title("whole runs")
     for ax in (left, right):

@@ -50,12 +50,16 @@ from microsim.geometry.poisson_spheres import (
     SLAB_MARGIN,
     TRIANGLE_BYTES,
     add_icospheres,
+    check_intersector,
+    intersector,
+    intersector_key,
     is_exact,
     level_for,
-    meshed_on_embreex,
     periodic_images,
     slab,
+    spheres_for_backend,
     unit_icosphere,
+    with_cells,
 )
 from microsim.tracer.scene import Scene, SceneBuilder
 
@@ -93,12 +97,14 @@ class Config(Section):
     subdivisions: int | None = Field(None, ge=0, le=MAX_SUBDIVISIONS, description="icosphere level")
     mesh_error: float | None = Field(None, gt=0.0, le=0.5, description="largest mesh-to-sphere distance, in the "
                                      "sphere's radii")
+    intersector: Literal["grid", "embree"] | None = intersector_key()
     statistics: bool = sphere_statistics.statistics_key()
     statistics_rays: int | None = sphere_statistics.rays_key()
 
     @pydantic.model_validator(mode="after")
     def _rays_with_statistics(self):
         surface_statistics.check_keys(self)
+        check_intersector(self)
         return self
 
 
@@ -135,9 +141,9 @@ def cache_directory(config) -> Path:
 
 
 def for_backend(config, backend: str):
-    """(config, note): the config as ``backend`` can trace it: on embreex exact spheres become
-    icospheres (module doc)."""
-    return meshed_on_embreex(config, backend, "spheres")
+    """(config, note): the config as ``backend`` can trace it: the sphere grid walks exact spheres
+    on either; with ``intersector = "embree"``, on embreex they become icospheres (module doc)."""
+    return spheres_for_backend(config, backend)
 
 
 def free_path(phi: float, sigma: float) -> float:
@@ -167,13 +173,14 @@ def resolve(config) -> dict:
 
 def sphere_model(scene) -> dict:
     """The spheres' model as the table records it: exact, or the icospheres' level, triangles,
-    vertex radius and largest distance to the sphere (in its radii)."""
+    vertex radius and largest distance to the sphere (in its radii); and how rays meet them."""
     if is_exact(scene):
-        return {"sphere_model": "exact", "triangles_per_sphere": 0, "vertex_radius": 1.0, "max_mesh_error": 0.0}
+        return {"sphere_model": "exact", "triangles_per_sphere": 0, "vertex_radius": 1.0, "max_mesh_error": 0.0,
+                "intersector": intersector(scene)}
     level = scene.subdivisions if scene.subdivisions is not None else level_for(scene.mesh_error)
     _, faces, vertex_radius, error = unit_icosphere(level)
     return {"sphere_model": "icosphere", "subdivisions": level, "triangles_per_sphere": len(faces),
-            "vertex_radius": vertex_radius, "max_mesh_error": error}
+            "vertex_radius": vertex_radius, "max_mesh_error": error, "intersector": intersector(scene)}
 
 
 def scene_bytes(resolved: dict) -> int:
@@ -220,5 +227,5 @@ def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
                 sphere_images=int(len(all_centres) - len(packed.centres)),
                 measured_volume_fraction=float(np.sum(4.0 / 3.0 * math.pi * packed.radii**3) / volume),
                 mean_radius=float(packed.radii.mean()), shrink=packed.shrink)
-    return sphere_statistics.add(builder.build(heights["z_top"], heights["z_bottom"], info), packed.centres,
-                                 packed.radii, resolved, config, rng)
+    scene = with_cells(builder.build(heights["z_top"], heights["z_bottom"], info), resolved)
+    return sphere_statistics.add(scene, packed.centres, packed.radii, resolved, config, rng)

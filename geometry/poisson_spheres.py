@@ -82,7 +82,7 @@ from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation
 
 from microsim.core.schema import Section
-from microsim.geometry import periodic_tile, sphere_statistics, surface_statistics
+from microsim.geometry import periodic_tile, sphere_cells, sphere_statistics, surface_statistics
 from microsim.geometry.periodic_tile import Tile
 from microsim.physics.boolean_model import free_path, number_density
 from microsim.physics.rng import geometry_rng
@@ -113,6 +113,32 @@ FALLBACK_MESH_ERROR = 0.01
 SLAB_MARGIN = 1e-3
 
 
+#: what ``scene.intersector`` defaults to for exact spheres: the grid traced them 1.19-1.30 times
+#: as fast as Embree's native spheres a thread at phi 0.1-0.6 (docs/developer/performance.md,
+#: "Sphere scenes: a grid walk against Embree")
+DEFAULT_INTERSECTOR = "grid"
+
+
+def intersector_key():
+    """The ``intersector`` key of the scenes of spheres."""
+    return Field(None, description="how rays meet exact spheres: grid (a walk over a uniform grid of cells, "
+                 "float64 roots, no Embree scene) or embree (Embree's native spheres); default grid for exact "
+                 "spheres, embree for icospheres (the only one they take)")
+
+
+def check_intersector(scene) -> None:
+    """ValueError, one line: the grid intersector asked for icospheres."""
+    if scene.intersector == "grid" and not is_exact(scene):
+        raise ValueError("scene.intersector = 'grid': for exact spheres only; drop subdivisions and mesh_error, "
+                         "or give intersector = 'embree'")
+
+
+def intersector(scene) -> str:
+    """The intersector of a validated scene section of spheres: the given one, or the default for
+    its spheres (the grid for exact ones, Embree for icospheres)."""
+    return scene.intersector or (DEFAULT_INTERSECTOR if is_exact(scene) else "embree")
+
+
 class Config(Section):
     kind: Literal["poisson_spheres"]
     volume_fraction: float = Field(ge=0.001, le=0.9, description="phi of the Boolean model")
@@ -123,12 +149,14 @@ class Config(Section):
     shading: Literal["exact", "flat", "smooth"] = Field("exact", description="exact: hits shaded with the sphere's "
                                                         "normal; flat: each icosphere triangle with its own; smooth: "
                                                         "with its vertex normals interpolated (module doc)")
+    intersector: Literal["grid", "embree"] | None = intersector_key()
     statistics: bool = sphere_statistics.statistics_key()
     statistics_rays: int | None = sphere_statistics.rays_key()
 
     @pydantic.model_validator(mode="after")
     def _rays_with_statistics(self):
         surface_statistics.check_keys(self)
+        check_intersector(self)
         return self
 
 
@@ -156,8 +184,16 @@ def check(config) -> None:
 
 
 def for_backend(config, backend: str):
-    """(config, note): the config as ``backend`` can trace it. Exact spheres are Embree's native
-    primitive, which the embreex backend cannot trace: there they become icospheres."""
+    """(config, note): the config as ``backend`` can trace it. The sphere grid walks exact spheres
+    whichever backend is named (scene/intersector says so); Embree's native spheres, which the
+    embreex backend cannot trace, become icospheres there."""
+    return spheres_for_backend(config, backend)
+
+
+def spheres_for_backend(config, backend: str):
+    """:func:`for_backend` of the scenes of spheres that take ``intersector``."""
+    if intersector(config.scene) == "grid":
+        return config, ""
     return meshed_on_embreex(config, backend, "spheres")
 
 
@@ -280,6 +316,7 @@ def resolve(config) -> dict:
         _, faces, vertex_radius, error = unit_icosphere(level)
         model = {"sphere_model": "icosphere", "subdivisions": level, "triangles_per_sphere": len(faces),
                  "vertex_radius": vertex_radius, "max_mesh_error": error}
+    model["intersector"] = intersector(scene)
     vertex_radius = model["vertex_radius"]
     # flat: the heights are the realization's tile's (module doc), stored per realization
     heights = {} if laid_as_tile(scene.shading) else {"base_z": -depth - vertex_radius,
@@ -352,8 +389,16 @@ def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
     if config.base is not None:
         builder.add_base_plane(resolved["base_z"], config.base)
     info = dict(resolved, spheres=int(count), sphere_images=int(len(all_centres) - count))
-    return sphere_statistics.add(builder.build(resolved["z_top"], resolved["z_bottom"], info), centres, 1.0, resolved,
-                                 config, rng)
+    scene = with_cells(builder.build(resolved["z_top"], resolved["z_bottom"], info), resolved)
+    return sphere_statistics.add(scene, centres, 1.0, resolved, config, rng)
+
+
+def with_cells(scene: Scene, resolved: dict) -> Scene:
+    """``scene``, with the cells the sphere grid walks (:mod:`microsim.geometry.sphere_cells`) where
+    its ``intersector`` is the grid."""
+    if resolved.get("intersector") == "grid":
+        scene.grid = sphere_cells.build(scene, resolved["free_path"])
+    return scene
 
 
 def icospheres(centres, rotations, level: int, radii=1.0):

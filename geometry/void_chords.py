@@ -10,8 +10,8 @@ from outside count (the smaller root, beyond ``T_MIN``), so a ray that starts on
 leaves it outward does not meet that sphere again. :func:`covered` says which points lie inside
 a sphere other than their own.
 
-Cells are at least a diameter of the largest sphere on a side (``CELL_DIAMETERS``), and as many as
-fit, up to ``MAX_CELLS``.
+Cells are at least a diameter of the largest sphere on a side (``CELL_DIAMETERS``; or the side
+the caller gives), and as many as fit, up to ``MAX_CELLS``.
 """
 
 from __future__ import annotations
@@ -44,15 +44,17 @@ class SphereGrid(NamedTuple):
     owners: np.ndarray
 
 
-def build(centres: np.ndarray, radii: np.ndarray, lo, sides, periodic) -> SphereGrid:
+def build(centres: np.ndarray, radii: np.ndarray, lo, sides, periodic, cell_side: float | None = None) -> SphereGrid:
     """The grid of the spheres (``centres`` (n, 3), ``radii`` (n,)) over the box ``lo``, ``sides``
     with the axes ``periodic`` (3 bools): every sphere listed in every cell it reaches into, its
-    image by the period along a periodic axis (module doc)."""
+    image by the period along a periodic axis (module doc). ``cell_side``: the cells' least side
+    (default ``CELL_DIAMETERS`` diameters of the largest sphere)."""
     lo, sides = np.asarray(lo, np.float64), np.asarray(sides, np.float64)
     periodic = np.asarray(periodic, np.bool_)
     centres = np.ascontiguousarray(centres, np.float64)
     radii = np.ascontiguousarray(np.broadcast_to(radii, (len(centres),)), np.float64)
-    size = max(CELL_DIAMETERS * 2.0 * float(radii.max(initial=0.0)), 1e-12)
+    least = CELL_DIAMETERS * 2.0 * float(radii.max(initial=0.0)) if cell_side is None else cell_side
+    size = max(least, 1e-12)
     size = max(size, (float(np.prod(sides)) / MAX_CELLS) ** (1.0 / 3.0))
     counts = np.maximum(1, np.floor(sides / size)).astype(np.int64)
     listed = _count_entries(centres, radii, lo, sides, periodic, counts)

@@ -39,9 +39,10 @@ def test_direct_backend_traces_the_same_paths_as_embreex_on_triangles():
         assert np.allclose(a.mean, b.mean, rtol=1e-12, atol=1e-15)
 
 
-def test_tables_are_bit_identical_for_any_thread_count():
+@pytest.mark.parametrize("intersector", ["embree", "grid"])
+def test_tables_are_bit_identical_for_any_thread_count(intersector):
     paths = 2 * scheduler.WAVE_CHUNKS_PER_THREAD * scheduler.CHUNK_PATHS + 3 * scheduler.CHUNK_PATHS + 17  # 3 waves of one thread
-    cfg = config.validate(spheres("direct", paths=paths))  # and a partial chunk
+    cfg = config.validate(spheres("direct", paths=paths, intersector=intersector))  # and a partial chunk
     one = trace(cfg, threads=1)
     for threads in (2, 3):  # 3: shares of a wave that differ in size
         other = trace(cfg, threads=threads)
@@ -61,9 +62,12 @@ def test_auto_falls_back_to_embreex_when_the_binding_cannot_load(monkeypatch):
     assert plan.backend == "embreex" and plan.threads == 1
     assert plan.backend_note == ("the direct backend is unavailable (no library here); "
                                  "one thread (the embreex backend has no threads)")
-    exact = Plan.from_config(config.validate(spheres("auto")), workers=2)
+    exact = Plan.from_config(config.validate(spheres("auto", intersector="embree")), workers=2)
     assert exact.scene["sphere_model"] == "icosphere" and exact.scene["max_mesh_error"] <= 0.01
     assert "exact spheres traced as icospheres within mesh_error 0.01" in exact.backend_note
+    walked = Plan.from_config(config.validate(spheres("auto")))  # the sphere grid needs no Embree
+    assert (walked.scene["sphere_model"], walked.scene["intersector"]) == ("exact", "grid")
+    assert "icospheres" not in walked.backend_note
     with pytest.raises(PlanError, match="^run.backend = 'direct': no library here$"):
         Plan.from_config(config.validate(spheres("direct", subdivisions=1)))
 
@@ -73,8 +77,8 @@ def test_a_fallback_run_says_why_in_the_table_and_on_the_terminal(monkeypatch, t
     monkeypatch.setattr(embree, "available", unavailable)
     path = tmp_path / "c.toml"
     path.write_text('[scene]\nkind = "poisson_spheres"\nvolume_fraction = 0.3\ntile = 8.0\ndepth = 3.0\n'
-                    '[material]\nkind = "lambert"\nalbedo = 0.5\n[illumination]\ntheta_i_deg = 0.0\n'
-                    '[run]\npaths = 400\nrealizations = 2\n')
+                    'intersector = "embree"\n[material]\nkind = "lambert"\nalbedo = 0.5\n'
+                    '[illumination]\ntheta_i_deg = 0.0\n[run]\npaths = 400\nrealizations = 2\n')
     out = tmp_path / "t.h5"
     assert main(["run", str(path), "--out", str(out)]) == 0
     assert "note: the direct backend is unavailable (no library here); exact spheres" in capsys.readouterr().out

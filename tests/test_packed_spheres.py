@@ -179,11 +179,13 @@ def test_bad_input_is_refused_in_one_line_and_nothing_is_written(scene, key, als
 
 
 def test_on_embreex_the_spheres_are_icospheres_that_trace_the_paths_the_direct_backend_traces():
-    """The example on the embreex backend: traced as icospheres within mesh_error 0.01 (said in the
-    plan's note), the same paths as the direct backend traces on the same icospheres (the counts
-    of segments, inside hits and kills equal; every estimate to 1e-12); and the icospheres pack the
-    same spheres as the exact scene (one packing generated a realization for both)."""
+    """The example with Embree's spheres (``intersector = "embree"``) on the embreex backend: traced
+    as icospheres within mesh_error 0.01 (said in the plan's note), the same paths as the direct
+    backend traces on the same icospheres (the counts of segments, inside hits and kills equal;
+    every estimate to 1e-12); and the icospheres pack the same spheres as the exact scene (one
+    packing generated a realization for both)."""
     data = example("packed_spheres")
+    data = {**data, "scene": {**data["scene"], "intersector": "embree"}}
     on_embreex = config.validate({**data, "run": {**data["run"], "backend": "embreex"}})
     plan = Plan.from_config(on_embreex)
     assert plan.scene["sphere_model"] == "icosphere" and "icospheres within mesh_error 0.01" in plan.backend_note

@@ -45,12 +45,20 @@ GOLDEN = {
         "run": {"paths": 2000, "realizations": 2, "seed": 4, "max_order": 3, "backend": "embreex"},
     },
     "exact": {
-        "scene": {"kind": "poisson_spheres", "volume_fraction": 0.3, "tile": 8.0, "depth": 4.0},
+        "scene": {"kind": "poisson_spheres", "volume_fraction": 0.3, "tile": 8.0, "depth": 4.0, "intersector": "embree"},
         "material": {"kind": "lambert", "albedo": 0.9},
         "base": {"kind": "lambert", "albedo": 0.5},
         "illumination": {"theta_i_deg": [0.0, 70.0]},
         "sensor": {"cells": 20},
         "run": {"paths": 4000, "realizations": 2, "seed": 3, "backend": "direct"},
+    },
+    "sphere_grid": {
+        "scene": {"kind": "poisson_spheres", "volume_fraction": 0.3, "tile": 8.0, "depth": 4.0},
+        "material": {"kind": "lambert", "albedo": 0.9},
+        "base": {"kind": "lambert", "albedo": 0.5},
+        "illumination": {"theta_i_deg": [0.0, 70.0]},
+        "sensor": {"cells": 20},
+        "run": {"paths": 4000, "realizations": 2, "seed": 3},
     },
     "vcavities": {
         "scene": {"kind": "vcavities", "distribution": "ggx", "roughness_x": 0.4, "roughness_y": 0.8},
@@ -77,7 +85,7 @@ GOLDEN = {
 
 #: how far each golden may move on a host of another platform, as a fraction of the largest value
 #: of each traced dataset (of the estimate, for a ``_stderr``): the table of tests/test_golden.py's docstring
-HOST_TOLERANCE = {"vcavities": 0.0, "vcavities_lambert": 0.0, "medium": 0.0, "conductor": 1e-6,
+HOST_TOLERANCE = {"vcavities": 0.0, "vcavities_lambert": 0.0, "medium": 0.0, "sphere_grid": 0.0, "conductor": 1e-6,
                   "exact": 2e-2, "spheres": 2e-2}
 #: the goldens whose paths diverge from one platform to another, and the bound on the move of their
 #: event counts, in square roots of the largest count (a count over the diverged paths)

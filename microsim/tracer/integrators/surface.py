@@ -3,8 +3,9 @@
 Its paths and events are :mod:`.surface_transport`'s kernels; its two backends, named as
 ``run.backend`` names them, call Embree and schedule paths in two ways: :mod:`.direct` (numba
 calls Embree, paths run to completion, threads) and :mod:`.embreex` (one embreex call per
-segment of all live paths). A scene that carries a height grid (``Scene.grid``: a heightfield
-with ``intersector = "grid"``) is traced by :mod:`.grid` instead, whichever backend is named.
+segment of all live paths). A scene that carries a grid (``Scene.grid``, with ``intersector =
+"grid"``) is walked instead, whichever backend is named: a heightfield's height grid by :mod:`.grid`,
+exact spheres' cells by :mod:`.sphere_grid`.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import numpy as np
 
 from microsim.core.tally import SINGLE_ALBEDO
 from microsim.tracer.estimators import DEFAULT, build, setups
-from microsim.tracer.integrators import direct, embreex, grid
+from microsim.tracer.integrators import direct, embreex, grid, sphere_grid
 from microsim.tracer.integrators.records import Beam
 from microsim.tracer.integrators.scheduler import wave_bytes
 from microsim.tracer.materials import Absorber
@@ -52,7 +53,7 @@ class SurfaceTracer:
         self.scene, self.sensor = scene, sensor
         self.arrays = scene.arrays()
         self.estimators = build(DEFAULT, sensor) if estimators is None else estimators
-        module = grid if scene.grid is not None else backend_module(backend)
+        module = backend_module(backend) if scene.grid is None else walker_of(scene.grid)
         self.backend = module.backend(scene, threads, self.estimators)
 
     def trace(self, wi, n_paths: int, key, max_order: int, albedo_scale=SINGLE_ALBEDO, phi_i=None):
@@ -84,8 +85,16 @@ class SurfaceTracer:
         builder.add_base_plane(-0.5, Absorber(kind="absorber"))
         beam = Beam(np.array([0.0, 0.0, 1.0]), np.uint64(0), 1, 0, np.ones(albedos))
         estimators = build(DEFAULT, sensor) if estimators is None else estimators
-        module = grid if scene is not None and scene.get("intersector") == "grid" else backend_module(backend)
+        module = backend_module(backend)
+        if scene is not None and scene.get("intersector") == "grid":
+            module = sphere_grid if scene.get("sphere_model") == "exact" else grid
         module.compile_kernels(beam, builder.build(1.0, -1.0, {}), setups(estimators, beam.wi, 0.0), estimators)
+
+
+def walker_of(cells):
+    """The module that walks a scene's grid: :mod:`.sphere_grid` for sphere cells, :mod:`.grid` for
+    a height grid."""
+    return sphere_grid if isinstance(cells, sphere_grid.SphereCells) else grid
 
 
 def backend_module(name: str):
