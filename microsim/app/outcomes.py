@@ -47,13 +47,15 @@ class RunOutcome:
             for t, p, a in zip(plan.theta_i, plan.phi_i, result.albedo))
 
     def report(self) -> list[str]:
-        """The lines ``microsim run`` prints: the albedos, the time and rate, and the notes
-        (compiling, paths rounded up, energy lost beyond the albedo's error, the backend's
-        substitutions), then where the tables went."""
+        """The lines ``microsim run`` prints: the albedos, the time and rate, the backend and the
+        scene's intersector, and the notes (compiling, paths rounded up, energy lost beyond the
+        albedo's error, the backend's substitutions), then where the tables went."""
         plan, results, first = self.plan, self.results, self.results[0]
         summaries = [self.albedo_summary(result) for result in results]
         rate = f"{self.paths_per_second:.3g} paths/s, " if first.units_traced else ""
         timing = f"{first.wall_time:.1f} s, {rate}{self.options.where(plan)}, backend {plan.backend}"
+        if plan.scene.get("intersector"):
+            timing += f", intersector {plan.scene['intersector']}"
         if first.units_resumed:
             timing += f"; {first.units_resumed} of {len(plan.units)} units resumed, {first.units_traced} traced"
         if len(results) == 1:
