@@ -51,6 +51,30 @@ def test_tables_are_bit_identical_for_any_thread_count(intersector):
             assert a.total.tobytes() == b.total.tobytes() and a.squares.tobytes() == b.squares.tobytes()
 
 
+def test_the_rows_two_chunks_write_share_no_cache_line():
+    """What two threads write on every event (path rows, counts, lost energy) lies a cache line
+    apart from chunk to chunk, so that neither invalidates the other's lines."""
+    from microsim.tracer.estimators import DEFAULT, build
+    from microsim.tracer.sensor import Sensor
+
+    work = scheduler.workspace(8, build(DEFAULT, Sensor.build(100)), albedos=3)
+
+    def lines(array, rows):  # the cache lines row span (start, stop) of array covers
+        first = array[rows[0]].ctypes.data if array.ndim > 1 else array[rows[0]:].ctypes.data
+        last = (array[rows[1] - 1].ctypes.data + array[rows[1] - 1].nbytes if array.ndim > 1
+                else array[rows[1] - 1:].ctypes.data + array.itemsize)
+        return set(range(first // 64, (last - 1) // 64 + 1))
+
+    for j in range(7):
+        for array in (work.counts, work.energy):
+            assert not lines(array, (j, j + 1)) & lines(array, (j + 1, j + 2))
+            assert array[j].flags.c_contiguous and not array[j].any()
+        slots = scheduler.ROW_STRIDE * j, scheduler.ROW_STRIDE * j + scheduler.SLOTS
+        after = scheduler.ROW_STRIDE * (j + 1), scheduler.ROW_STRIDE * (j + 1) + scheduler.SLOTS
+        for array in (*work.paths, work.rays.end, work.queries):
+            assert not lines(array, slots) & lines(array, after)
+
+
 def unavailable(*args):
     raise embree.EmbreeUnavailable("no library here")
 

@@ -19,7 +19,14 @@ import numpy as np
 
 from microsim.core.tally import SEGMENTS
 from microsim.tracer import embree
-from microsim.tracer.integrators.scheduler import CHUNK_PATHS, SLOTS, chunk_tally, trace_in_waves, wave_rows, workspace
+from microsim.tracer.integrators.scheduler import (
+    CHUNK_PATHS,
+    ROW_STRIDE,
+    chunk_tally,
+    trace_in_waves,
+    wave_rows,
+    workspace,
+)
 from microsim.tracer.integrators.surface_transport import (
     evaluate_on_shape,
     follow,
@@ -83,7 +90,7 @@ def trace_chunks(first, start, stop, beam, world, setups, work):
     row j, its paths in path row j (see :func:`trace_chunk`)."""
     for j in range(start, stop):
         chunk = first + j
-        trace_chunk(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths), SLOTS * j, beam, world,
+        trace_chunk(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths), ROW_STRIDE * j, beam, world,
                     setups, work, chunk_tally(work, j, beam))
 
 

@@ -37,28 +37,46 @@ WAVE_CHUNKS_PER_THREAD = 4
 
 def wave_bytes(threads: int, tally_bytes: int) -> int:
     """Bytes a tracer of chunks in waves works in on ``threads`` threads: a wave's chunk tallies
-    (``tally_bytes`` each) and their path rows."""
-    return WAVE_CHUNKS_PER_THREAD * threads * (tally_bytes + 1024)
+    (``tally_bytes`` each) and their ROW_STRIDE path rows (an RTCRayHit record and the path's
+    fields: under 128 bytes a row)."""
+    return WAVE_CHUNKS_PER_THREAD * threads * (tally_bytes + 128 * ROW_STRIDE)
 #: paths of a chunk traced side by side (:func:`trace_chunk`)
 SLOTS = 2
+#: path rows from one chunk's first to the next's: SLOTS are used, and the gap keeps the rows two
+#: threads write on every event (random state, weight, order, the segment's query) off each
+#: other's cache lines (64 rows of the narrowest field, int8, fill a 64-byte line)
+ROW_STRIDE = 64
 
-#: SLOTS rows per chunk of a wave (the paths it is tracing, their segments and Embree queries:
-#: RTCRayHit records)
-#: and one row per chunk (its tally: the estimators' records, lost energy, counts); and the ray
+#: ROW_STRIDE path rows per chunk of a wave, SLOTS of them used (the paths it is tracing, their
+#: segments and Embree queries: RTCRayHit records), and one row per chunk (its tally: the
+#: estimators' records, lost energy, counts, the last two a cache line apart); and the ray
 #: log (origin, direction, tfar of every query, in order; empty unless asked for)
 Workspace = namedtuple("Workspace", ["paths", "rays", "queries", "estimates", "energy", "counts", "log", "logged"])
 
 
 def workspace(rows: int, estimators, log_rays: int = 0, albedos: int = 1) -> Workspace:
-    """Tallies of ``estimators`` for ``rows`` chunks (of ``albedos`` albedos each), and SLOTS path
-    rows (paths, queries) for each: two query records at least, as the views into a single
-    record would be contiguous, which numba types apart (a second compile of every kernel)."""
-    queries = embree.ray_hits(SLOTS * rows)
-    rays = Rays(*embree.ray_views(queries), np.zeros(SLOTS * rows, np.int8))  # segments written into the queries
-    return Workspace(allocate_paths(SLOTS * rows), rays, queries,
+    """Tallies of ``estimators`` for ``rows`` chunks (of ``albedos`` albedos each), and ROW_STRIDE
+    path rows (paths, queries) for each, SLOTS used (two query records at least, as the views
+    into a single record would be contiguous, which numba types apart: a second compile of every
+    kernel)."""
+    queries = embree.ray_hits(ROW_STRIDE * rows)
+    rays = Rays(*embree.ray_views(queries), np.zeros(ROW_STRIDE * rows, np.int8))  # segments written into the queries
+    return Workspace(allocate_paths(ROW_STRIDE * rows), rays, queries,
                      tuple(estimator.allocate(rows, albedos) for estimator in estimators),
-                     np.zeros((rows, *albedo_axis(albedos), len(ENERGY_NAMES))), np.zeros((rows, len(COUNT_NAMES)), np.int64),
+                     line_apart_rows(rows, (*albedo_axis(albedos), len(ENERGY_NAMES)), np.float64),
+                     line_apart_rows(rows, (len(COUNT_NAMES),), np.int64),
                      np.zeros((log_rays, 7), np.float32), np.zeros(1, np.int64))
+
+
+def line_apart_rows(rows: int, shape: tuple, dtype) -> np.ndarray:
+    """Zeros (rows, *shape), each row contiguous and starting a cache line (64 bytes) or more
+    after the last one ends: rows that threads add to on every segment share no line."""
+    row_bytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
+    stride = -(-row_bytes // 64) * 64 + 64
+    buffer = np.zeros(rows * stride + 64, np.uint8)
+    start = -buffer.ctypes.data % 64
+    inner = np.lib.stride_tricks.as_strided(np.zeros(1, dtype), shape).strides  # C order within a row
+    return np.lib.stride_tricks.as_strided(buffer[start:start + rows * stride].view(dtype), (rows, *shape), (stride, *inner))
 
 
 def wave_rows(n_paths: int, threads: int) -> int:

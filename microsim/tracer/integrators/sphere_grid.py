@@ -26,7 +26,14 @@ import numba
 import numpy as np
 
 from microsim.core.tally import SEGMENTS
-from microsim.tracer.integrators.scheduler import CHUNK_PATHS, SLOTS, chunk_tally, trace_in_waves, wave_rows, workspace
+from microsim.tracer.integrators.scheduler import (
+    CHUNK_PATHS,
+    ROW_STRIDE,
+    chunk_tally,
+    trace_in_waves,
+    wave_rows,
+    workspace,
+)
 from microsim.tracer.integrators.surface_transport import (
     evaluate_on_shape,
     follow,
@@ -97,10 +104,10 @@ class SphereGridBackend:
 @numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def trace_chunks(first, start, stop, beam, world, setups, work):
     """Trace chunks first+start .. first+stop-1 of the beam to completion, chunk first+j into tally
-    row j, its paths one after the other in path row SLOTS j."""
+    row j, its paths one after the other in path row ROW_STRIDE j."""
     scene = world.scene
     for j in range(start, stop):
-        chunk, row = first + j, SLOTS * j
+        chunk, row = first + j, ROW_STRIDE * j
         tally = chunk_tally(work, j, beam)
         for number in range(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths)):
             start_path(work.paths, work.rays, row, number, beam, scene)

@@ -60,7 +60,7 @@ import numba
 from microsim.core.tally import TRANSMITTED
 from microsim.tracer.estimators.hooks import each_exit, each_interaction
 from microsim.tracer.integrators.events import add_lost, cut_at_max_order, idled, interacted, truncate
-from microsim.tracer.integrators.scheduler import CHUNK_PATHS, chunk_tally
+from microsim.tracer.integrators.scheduler import CHUNK_PATHS, ROW_STRIDE, chunk_tally
 from microsim.tracer.jit.dispatch import Generic
 
 #: kinds of event (a transport's ``next_event``): the path scatters; leaves through the top;
@@ -144,10 +144,10 @@ def walk(row, beam, world, setups, tally, start, next_event, interact):
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def trace_chunks(share, beam, world, setups, work, start, next_event, interact):
     """Chunks first+a .. first+b-1 of the beam (``share`` = (first, a, b)), chunk first+j into tally
-    row j, its paths one after the other in path row j (:func:`walk`)."""
+    row j, its paths one after the other in path row ROW_STRIDE j (:func:`walk`)."""
     first, a, b = share
     for j in range(a, b):
         tally = chunk_tally(work, j, beam)
         chunk = first + j
         for number in range(chunk * CHUNK_PATHS, min((chunk + 1) * CHUNK_PATHS, beam.n_paths)):
-            walk((work, j, number), beam, world, setups, tally, start, next_event, interact)
+            walk((work, ROW_STRIDE * j, number), beam, world, setups, tally, start, next_event, interact)
