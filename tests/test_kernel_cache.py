@@ -4,6 +4,7 @@ import os
 import pickle
 from pathlib import Path
 
+import pytest
 from numba.core import caching
 
 from microsim.tracer.jit import kernel_cache
@@ -170,3 +171,54 @@ def test_a_plugin_registered_after_a_kernel_was_defined_makes_its_cache_stale(tm
     assert index.load("key") == b"new machine code"
     plugin.write_text("X = 22\n")
     assert index.load("key") is None
+
+
+#: the chunk kernels of every tracer: what Run.compile compiles ahead and a run's threads call
+CHUNK_KERNELS = (
+    ("microsim.tracer.integrators.direct", "trace_chunks"),
+    ("microsim.tracer.integrators.sphere_grid", "trace_chunks"),
+    ("microsim.tracer.integrators.grid", "trace_chunks"),
+    ("microsim.tracer.integrators.vcavity", "trace_chunks_analytic"),
+    ("microsim.tracer.integrators.vcavity", "trace_chunks_embree"),
+    ("microsim.tracer.integrators.medium", "trace_medium_chunks"),
+)
+#: every scene kind's example, and the examples of its other intersectors
+TYPED_EXAMPLES = [(kind, None) for kind in ("plane", "mesh", "micrograins", "halfspace_medium", "packed_spheres")] + [
+    ("poisson_spheres", "grid"), ("poisson_spheres", "embree"), ("heightfield", "grid"),
+    ("heightfield", "triangles"), ("vcavities", "analytic"), ("vcavities", "embree")]
+
+
+@pytest.mark.parametrize("kind, intersector", TYPED_EXAMPLES)
+@pytest.mark.parametrize("albedos", [1, 2])
+def test_a_tracer_is_compiled_ahead_on_the_types_its_runs_trace(kind, intersector, albedos, monkeypatch):
+    """Run.compile calls each chunk kernel on the types a run's threads call it on: a run of
+    several chunks a unit on two threads, one or two albedos. numba compiles a kernel once for
+    each distinct type signature, so one more signature is a second compile of the whole tracer
+    (15-25 s). The kernels are replaced by recorders of their arguments' numba types: nothing is
+    compiled or traced."""
+    import importlib
+
+    import numba
+
+    from microsim import config
+    from microsim.testing import trace_albedos
+    from microsim.testing.scenes import example
+    from microsim.tracer.integrators.scheduler import CHUNK_PATHS
+
+    seen = {}
+    for module, name in CHUNK_KERNELS:
+        monkeypatch.setattr(importlib.import_module(module), name,
+                            lambda *args, key=(module, name): seen.setdefault(key, set()).add(numba.typeof(args)))
+    data = example(kind)
+    if intersector is not None:
+        data["scene"]["intersector"] = intersector
+    if "albedo" not in data["material"]:
+        data["material"] = {"kind": "lambert"}
+    if albedos > 1 and "base" in data:
+        data["base"] = {"kind": "absorber"}  # several albedos from one run: the base must absorb
+    data["material"]["albedo"] = [0.3, 0.6] if albedos > 1 else 0.6
+    data["run"]["paths"] = 3 * CHUNK_PATHS * data["run"]["realizations"]
+    trace_albedos(config.validate(data), threads=2)
+    assert len(seen) == 1, seen.keys()
+    (kernel, signatures), = seen.items()
+    assert len(signatures) == 1, (kernel, [str(s) for s in signatures])

@@ -69,8 +69,12 @@ def workspace(rows: int, estimators, log_rays: int = 0, albedos: int = 1) -> Wor
 
 
 def line_apart_rows(rows: int, shape: tuple, dtype) -> np.ndarray:
-    """Zeros (rows, *shape), each row contiguous and starting a cache line (64 bytes) or more
-    after the last one ends: rows that threads add to on every segment share no line."""
+    """Zeros (max(rows, 2), *shape), each row contiguous and starting a cache line (64 bytes) or
+    more after the last one ends: rows that threads add to on every segment share no line. Two
+    rows at least: numpy flags a view of one row contiguous whatever its stride, and numba would
+    type a one-row workspace (what a tracer is compiled on) apart from a run's, compiling every
+    kernel twice."""
+    rows = max(rows, 2)
     row_bytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
     stride = -(-row_bytes // 64) * 64 + 64
     buffer = np.zeros(rows * stride + 64, np.uint8)
