@@ -142,7 +142,7 @@ def walk(cells, o, d, end):
     while True:
         cell = (ix * ny + iy) * nz + iz
         for e in range(cells.starts[cell], cells.starts[cell + 1]):
-            t = sphere_root(cells.spheres[e], o, d, inverse_length2)
+            t = sphere_root(cells.spheres[e], o, d, inverse_length2, best)
             if t < best:
                 best, best_entry = t, e
         exit_t = min(next_x, next_y, next_z)
@@ -202,14 +202,18 @@ def axis_start(p, d, side, count):
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
-def sphere_root(sphere, o, d, inverse_length2):
+def sphere_root(sphere, o, d, inverse_length2, best):
     """t >= 0 at which the ray o + t d meets the sphere (x, y, z, r) = ``sphere``: the nearer root,
-    else (from inside) the farther one; inf if neither (``inverse_length2`` = 1 / |d|^2)."""
+    else (from inside) the farther one; inf if neither (``inverse_length2`` = 1 / |d|^2), or if,
+    from outside, the sphere lies behind the origin or its nearer root at ``best`` or beyond (told
+    without the square root: -b - best >= 0 and (-b - best)^2 >= disc; one branch for the three
+    misses, which most listed spheres are)."""
     ox, oy, oz = o[0] - sphere[0], o[1] - sphere[1], o[2] - sphere[2]
     b = (ox * d[0] + oy * d[1] + oz * d[2]) * inverse_length2
     c = (ox * ox + oy * oy + oz * oz - sphere[3] * sphere[3]) * inverse_length2
     disc = b * b - c
-    if disc < 0.0:
+    beyond = -b - best
+    if (disc < 0.0) | ((c > 0.0) & ((b > 0.0) | ((beyond >= 0.0) & (beyond * beyond >= disc)))):
         return math.inf
     root = math.sqrt(disc)
     if -b - root >= 0.0:
