@@ -40,6 +40,11 @@ TRIANGLES_ID, SPHERES_ID, INSTANCE_ID = 0, 1, 2
 #: (the two backends then find the same hits, to the bit); without it 13 % of hit distances on
 #: a sphere mesh differ
 SCENE_FLAG_ROBUST = 1 << 2
+#: RTCBuildQuality values (rtcore_common.h), and the quality scenes are built at: Mitsuba 3's HIGH
+#: answers no query faster on a robust triangle scene or on native spheres (docs/developer/performance.md,
+#: "Raw queries: microsim's Embree scene against Mitsuba 3's")
+BUILD_QUALITY_LOW, BUILD_QUALITY_MEDIUM, BUILD_QUALITY_HIGH = 0, 1, 2
+BUILD_QUALITY = BUILD_QUALITY_MEDIUM
 #: RTCDeviceProperty values (rtcore_device.h)
 DEVICE_BACKFACE_CULLING, DEVICE_POINT_GEOMETRY = 65, 101
 INVALID_ID = 0xFFFFFFFF
@@ -102,6 +107,7 @@ class _Library:
             ("rtcNewDevice", p, [ctypes.c_char_p]), ("rtcGetDeviceError", ctypes.c_int, [p]),
             ("rtcGetDeviceProperty", ctypes.c_ssize_t, [p, ctypes.c_int]),
             ("rtcNewScene", p, [p]), ("rtcSetSceneFlags", None, [p, ctypes.c_int]),
+            ("rtcSetSceneBuildQuality", None, [p, ctypes.c_int]), ("rtcSetGeometryBuildQuality", None, [p, ctypes.c_int]),
             ("rtcCommitScene", None, [p]), ("rtcReleaseScene", None, [p]),
             ("rtcNewGeometry", p, [p, ctypes.c_int]), ("rtcSetNewGeometryBuffer", p, [p, ctypes.c_int, u, ctypes.c_int, s, s]),
             ("rtcCommitGeometry", None, [p]), ("rtcAttachGeometryByID", None, [p, p, u]),
@@ -144,6 +150,10 @@ class Scene:
     backends find the same hits (see SCENE_FLAG_ROBUST); with spheres it is not (faster, and the
     same sphere hits: docs/developer/performance.md, 'The direct backend').
 
+    ``quality`` is the BVH's build quality; ``robust`` (None: robust for triangles alone) sets
+    RTC_SCENE_FLAG_ROBUST, without which a ray through a shared edge may pass between two
+    triangles (benchmarks/raw_queries.py builds a scene as Mitsuba 3 does, HIGH and not robust).
+
     ``sphere_scale`` = (sx, sy) other than (1, 1): the spheres are given in the frame where x is
     scaled by sx and y by sy, and stand for the ellipsoids that frame maps onto them. They go
     into a scene of their own, which the top scene holds as an instance with the transform
@@ -155,13 +165,16 @@ class Scene:
     handle = 0
     _spheres_scene = 0
 
-    def __init__(self, vertices=None, faces=None, spheres=None, lib=None, sphere_scale=(1.0, 1.0)):
+    def __init__(self, vertices=None, faces=None, spheres=None, lib=None, sphere_scale=(1.0, 1.0),
+                 quality: int = BUILD_QUALITY, robust: bool | None = None):
         lib = load() if lib is None else lib
         self._lib = lib
         self.handle = lib.check(lib.rtcNewScene(lib.device), "creating a scene")
         has_spheres = spheres is not None and len(spheres) > 0
-        if not has_spheres:
+        self.quality, self.robust = quality, not has_spheres if robust is None else robust
+        if self.robust:
             lib.rtcSetSceneFlags(self.handle, SCENE_FLAG_ROBUST)
+        lib.rtcSetSceneBuildQuality(self.handle, quality)
         offsets, count = {}, 0
         if faces is not None and len(faces):
             self._attach(self.handle, TRIANGLES_ID, GEOMETRY_TRIANGLE,
@@ -175,6 +188,7 @@ class Scene:
                 self._attach(self.handle, SPHERES_ID, GEOMETRY_SPHERE_POINT, buffers)
             else:
                 self._spheres_scene = lib.check(lib.rtcNewScene(lib.device), "creating a scene")
+                lib.rtcSetSceneBuildQuality(self._spheres_scene, quality)
                 self._attach(self._spheres_scene, SPHERES_ID, GEOMETRY_SPHERE_POINT, buffers)
                 lib.rtcCommitScene(self._spheres_scene)
                 self._attach_instance(self._spheres_scene, sphere_scale)
@@ -190,6 +204,7 @@ class Scene:
         """Attach to ``scene``, as ``geometry_id``, one geometry of ``buffers`` (type, format, data)."""
         lib = self._lib
         geometry = lib.check(lib.rtcNewGeometry(lib.device, geometry_type), "creating a geometry")
+        lib.rtcSetGeometryBuildQuality(geometry, self.quality)
         for buffer_type, fmt, data in buffers:
             data = np.ascontiguousarray(data)
             address = lib.rtcSetNewGeometryBuffer(geometry, buffer_type, 0, fmt, data.strides[0], len(data))
