@@ -28,7 +28,6 @@ import sys
 import time
 from pathlib import Path
 
-import numba
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -38,19 +37,9 @@ from throughput import fused_trace, grid_trace, load, realization, replay, repla
 from microsim.core.tally import SEGMENTS  # noqa: E402
 from microsim.physics.rng import stream_key  # noqa: E402
 from microsim.testing import trace
-from microsim.tracer.integrators.grid import GridBackend, walk  # noqa: E402
+from microsim.tracer.integrators.grid import fill_first_hits, first_hits  # noqa: E402
 from microsim.tracer.integrators.records import Beam  # noqa: E402
 from microsim.tracer.sensor import Sensor  # noqa: E402
-
-
-@numba.njit(cache=True)
-def walk_all(grid, origins, directions, tfar, out):
-    """The grid backend's walk on every query: out[r] = t of the first hit, -1 where none."""
-    for r in range(len(origins)):
-        o = (np.float64(origins[r, 0]), np.float64(origins[r, 1]), np.float64(origins[r, 2]))
-        d = (np.float64(directions[r, 0]), np.float64(directions[r, 1]), np.float64(directions[r, 2]))
-        face, t = walk(grid, o, d, np.float64(tfar[r]))
-        out[r] = t if face >= 0 else -1.0
 
 
 def measure(cfg, paths: int, repeats: int) -> dict:
@@ -65,19 +54,20 @@ def measure(cfg, paths: int, repeats: int) -> dict:
         wi = np.asarray(plan.incidence_direction(k), np.float64)
         warm = Beam(wi, np.uint64(0), 200, 0)
         fused_trace(scene, sensor, warm, 1, log_rays=1)
-        grid_trace(grid_scene, sensor, warm, 1, GridBackend)
+        grid_trace(grid_scene, sensor, warm, 1)
         beam = Beam(wi, np.uint64(stream_key(cfg.run.seed, 0, k)), paths, 0)
         embree_runs = [fused_trace(scene, sensor, beam, 1) for _ in range(repeats)]
-        grid_runs = [grid_trace(grid_scene, sensor, beam, 1, GridBackend) for _ in range(repeats)]
+        grid_runs = [grid_trace(grid_scene, sensor, beam, 1) for _ in range(repeats)]
         segments = int(embree_runs[0][1].counts[SEGMENTS])
         grid_segments = int(grid_runs[0][1].counts[SEGMENTS])
         logger = fused_trace(scene, sensor, beam, 1, log_rays=segments)[2]
         log = [np.ascontiguousarray(c) for c in (logger.ray_log[:, :3], logger.ray_log[:, 3:6], logger.ray_log[:, 6])]
         prim, t_embree, _ = logger.embree.intersect(*log)
-        walked = np.empty(len(log[0]))
         embree_s = min(replay_direct(logger) for _ in range(repeats))
-        walk_s = min(replay([log], lambda o, d, t: walk_all(grid_scene.grid, o, d, t, walked)) for _ in range(repeats))
-        hit_e, hit_w = prim >= 0, walked >= 0.0
+        faces, walked = first_hits(grid_scene.grid, *log)
+        walk_s = min(replay([log], lambda o, d, t: fill_first_hits(grid_scene.grid, o, d, t, faces, walked))
+                     for _ in range(repeats))
+        hit_e, hit_w = prim >= 0, faces >= 0
         both = hit_e & hit_w
         close = np.abs(walked[both] - t_embree[both]) <= 1e-5 * np.maximum(1.0, t_embree[both])
         theta = cfg.illumination.theta_i_deg[k]

@@ -82,7 +82,8 @@ from microsim.tracer.estimators import DEFAULT, build, setups
 from microsim.tracer.integrators.direct import DirectBackend
 from microsim.tracer.integrators.embreex import EmbreexBackend, embree_scene
 from microsim.tracer.integrators.records import Beam
-from microsim.tracer.integrators.sphere_grid import SphereGridBackend, first_hits
+from microsim.tracer.integrators.sphere_grid import SphereCells
+from microsim.tracer.integrators.surface import walker_of
 from microsim.tracer.sensor import Sensor
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -169,11 +170,11 @@ def fused_trace(scene, sensor, beam, threads: int, log_rays: int = 0):
     return time.perf_counter() - start, tally, backend
 
 
-def grid_trace(scene, sensor, beam, threads: int, backend_class=SphereGridBackend):
-    """(seconds, tally) of a grid backend (the sphere grid unless told) tracing ``beam`` through
-    ``scene`` (its ``grid`` set)."""
+def grid_trace(scene, sensor, beam, threads: int):
+    """(seconds, tally) of the backend that walks ``scene.grid`` (sphere cells or a height grid)
+    tracing ``beam`` through ``scene``."""
     estimators = build(DEFAULT, sensor)
-    backend = backend_class(scene, estimators, threads)
+    backend = walker_of(scene.grid).backend(scene, threads, estimators)
     kernel_setups = setups(estimators, beam.wi, 0.0)
     start = time.perf_counter()
     tally = backend.trace(beam, scene.arrays(), kernel_setups)
@@ -181,43 +182,57 @@ def grid_trace(scene, sensor, beam, threads: int, backend_class=SphereGridBacken
 
 
 def replay_walk(cells, logger) -> float:
-    """Seconds the sphere grid's walk takes on the queries of ``logger``, in their order."""
+    """Seconds the grid's walk (a sphere grid's or a height grid's) takes on the queries of
+    ``logger``, in their order, into arrays written before the clock."""
     log = [np.ascontiguousarray(c) for c in (logger.ray_log[:, :3], logger.ray_log[:, 3:6], logger.ray_log[:, 6])]
-    first_hits(cells, *(c[:10] for c in log))  # compiled (or loaded) before the clock
-    start = time.perf_counter()
-    first_hits(cells, *log)
-    return time.perf_counter() - start
+    walker = walker_of(cells)
+    hits = walker.first_hits(cells, *log)  # compiled (or loaded), and the hits written, before the clock
+    return replay([log], lambda o, d, t: walker.fill_first_hits(cells, o, d, t, *hits))
 
 
 def gridded(cfg) -> bool:
-    """Whether the scene's exact spheres can be walked by the sphere grid (``intersector``)."""
-    return "intersector" in type(cfg.scene).model_fields and tessellated(cfg)
+    """Whether the scene can be walked by a grid: exact spheres or grains (``intersector``
+    "grid"), or a heightfield."""
+    return cfg.scene.kind == "heightfield" or ("intersector" in type(cfg.scene).model_fields and tessellated(cfg))
 
 
-def measure_scene(cfg, paths: int, repeats: int) -> dict:
-    """Figures 1 and 2 of the module docstring for one config."""
+def grid_cells(cfg, plan, exact):
+    """The cells a grid walks for the realization ``exact`` of ``cfg``: a heightfield's height grid
+    (the same realization generated with ``intersector = "grid"``), the sphere cells of spheres or
+    grains as their generators build them."""
+    if cfg.scene.kind == "heightfield":
+        return realization(cfg.model_copy(update={"scene": cfg.scene.model_copy(update={"intersector": "grid"})}))[2].grid
+    if cfg.scene.kind == "micrograins":
+        return sphere_cells.build(exact, sphere_cells.GRAIN_SIDE)
+    return sphere_cells.build(exact, sphere_cells.void_side(exact, plan.scene["free_path"]))
+
+
+def measure_scene(cfg, paths: int, repeats: int, old: bool = True) -> dict:
+    """Figures 1 and 2 of the module docstring for one config (``old`` False: not figure 1)."""
     sensor = Sensor.build(cfg.sensor.cells)
     _, plan, mesh = realization(cfg, mesh_error=FORMER_MESH_ERROR)
     exact = realization(cfg, mesh_error=None, subdivisions=None)[2] if tessellated(cfg) else mesh
     wi = plan.incidence_direction(0)
     out = {"triangles": mesh.n_triangles, "spheres": len(exact.spheres)}
-    embreex = embreex_run(mesh)
     warm = Beam(np.asarray(wi, np.float64), np.uint64(0), 1000, 0)  # compile (or load) every kernel first
-    replay(wavefront_trace(mesh, sensor, embreex, warm)[2].batches, embreex)
+    if old:
+        embreex = embreex_run(mesh)
+        replay(wavefront_trace(mesh, sensor, embreex, warm)[2].batches, embreex)
     _, _, logger = fused_trace(exact, sensor, warm, 1, log_rays=1)
     logger.embree.intersect(logger.ray_log[:, :3], logger.ray_log[:, 3:6], logger.ray_log[:, 6])
     grid = gridded(cfg)
     if grid:
-        exact.grid = sphere_cells.build(exact, plan.scene["free_path"])
+        exact.grid = grid_cells(cfg, plan, exact)
         grid_trace(exact, sensor, warm, 1)
     best = {}
     for k in range(repeats):
         b = Beam(np.asarray(wi, np.float64), np.uint64(stream_key(cfg.run.seed, 0, k)), paths, 0)
-        seconds, tally, recorder = wavefront_trace(mesh, sensor, embreex, b)
-        old_segments = int(tally.counts[SEGMENTS])
-        best["old"] = min(best.get("old", np.inf), seconds)
-        best["old_outside"] = min(best.get("old_outside", np.inf), seconds - recorder.seconds)
-        best["raw_embreex"] = min(best.get("raw_embreex", np.inf), replay(recorder.batches, embreex))
+        if old:
+            seconds, tally, recorder = wavefront_trace(mesh, sensor, embreex, b)
+            old_segments = int(tally.counts[SEGMENTS])
+            best["old"] = min(best.get("old", np.inf), seconds)
+            best["old_outside"] = min(best.get("old_outside", np.inf), seconds - recorder.seconds)
+            best["raw_embreex"] = min(best.get("raw_embreex", np.inf), replay(recorder.batches, embreex))
         for threads in (1, 2):
             seconds, fused_tally, _ = fused_trace(exact, sensor, b, threads)
             best[f"new_{threads}"] = min(best.get(f"new_{threads}", np.inf), seconds)
@@ -229,14 +244,14 @@ def measure_scene(cfg, paths: int, repeats: int) -> dict:
                 seconds, grid_tally = grid_trace(exact, sensor, b, threads)
                 best[f"grid_{threads}"] = min(best.get(f"grid_{threads}", np.inf), seconds)
             best["walk"] = min(best.get("walk", np.inf), replay_walk(exact.grid, logger))
-    out.update({
-        "old_segments": old_segments, "new_segments": new_segments,
-        "raw_embreex_rays_per_s": old_segments / best["raw_embreex"],
-        "old_segments_per_s": old_segments / best["old"], "old_paths_per_s": paths / best["old"],
-        "old_ratio": best["raw_embreex"] / best["old"],
-        "old_outside_embree_ns_per_segment": best["old_outside"] / old_segments * 1e9,
-        "raw_direct_rays_per_s": new_segments / best["raw_direct"],
-    })
+    out.update({"new_segments": new_segments, "raw_direct_rays_per_s": new_segments / best["raw_direct"]})
+    if old:
+        out.update({
+            "old_segments": old_segments, "raw_embreex_rays_per_s": old_segments / best["raw_embreex"],
+            "old_segments_per_s": old_segments / best["old"], "old_paths_per_s": paths / best["old"],
+            "old_ratio": best["raw_embreex"] / best["old"],
+            "old_outside_embree_ns_per_segment": best["old_outside"] / old_segments * 1e9,
+        })
     for threads in (1, 2):
         out[f"new_segments_per_s_{threads}_threads"] = new_segments / best[f"new_{threads}"]
         out[f"new_paths_per_s_{threads}_threads"] = paths / best[f"new_{threads}"]
@@ -244,8 +259,12 @@ def measure_scene(cfg, paths: int, repeats: int) -> dict:
     out["direct_outside_embree_ns_per_segment"] = (best["new_1"] - best["raw_direct"]) / new_segments * 1e9
     if grid:
         grid_segments = int(grid_tally.counts[SEGMENTS])
-        out["grid_cells"] = int(np.prod(exact.grid.counts))
-        out["grid_cell_side"] = float(exact.grid.side.min())
+        if isinstance(exact.grid, SphereCells):
+            out["grid_cells"] = int(np.prod(exact.grid.counts))
+            out["grid_cell_side"] = float(exact.grid.side.min())
+        else:
+            out["grid_cells"] = int(exact.grid.heights.size)
+            out["grid_cell_side"] = float(exact.grid.pixel)
         for threads in (1, 2):
             out[f"grid_segments_per_s_{threads}_threads"] = grid_segments / best[f"grid_{threads}"]
         out["grid_over_direct_per_thread"] = out["grid_segments_per_s_1_threads"] / out["new_segments_per_s_1_threads"]
@@ -276,12 +295,14 @@ def absorbing_floor(cfg, paths: int, repeats: int) -> float:
     return best_replay / best_trace
 
 
-def measure_runs(cfg, run_paths: int, repeats: int) -> dict:
-    """Figure 3: best paths/s of whole runs, alternating the four ways of running."""
-    old_cfg, _, _ = realization(cfg, mesh_error=FORMER_MESH_ERROR)
-    old_cfg = old_cfg.model_copy(update={"run": old_cfg.run.model_copy(update={"backend": "embreex"})})
-    ways = {"old_1_worker": (old_cfg, 1, 1), "old_2_workers": (old_cfg, 2, 1),
-            "new_1_thread": (cfg, 1, 1), "new_2_threads": (cfg, 1, 2)}
+def measure_runs(cfg, run_paths: int, repeats: int, old: bool = True) -> dict:
+    """Figure 3: best paths/s of whole runs, alternating the ways of running (``old`` False:
+    without the old backend's)."""
+    ways = {"new_1_thread": (cfg, 1, 1), "new_2_threads": (cfg, 1, 2)}
+    if old:
+        old_cfg, _, _ = realization(cfg, mesh_error=FORMER_MESH_ERROR)
+        old_cfg = old_cfg.model_copy(update={"run": old_cfg.run.model_copy(update={"backend": "embreex"})})
+        ways.update({"old_1_worker": (old_cfg, 1, 1), "old_2_workers": (old_cfg, 2, 1)})
     if gridded(cfg):
         grid_cfg = cfg.model_copy(update={"scene": cfg.scene.model_copy(update={"intersector": "grid"})})
         ways.update({"grid_1_thread": (grid_cfg, 1, 1), "grid_2_threads": (grid_cfg, 1, 2)})
@@ -303,7 +324,7 @@ def load(run: str, run_paths: int):
     spheres met by Embree too (``intersector = "embree"``; the sphere grid is figure 3's)."""
     overrides = {"run.paths": run_paths, "run.realizations": 8}
     cfg = config_module.load(ROOT / "runs" / f"{run}.toml", overrides)
-    if gridded(cfg):
+    if gridded(cfg) and cfg.scene.kind != "heightfield":
         cfg = config_module.load(ROOT / "runs" / f"{run}.toml", {**overrides, "scene.intersector": "embree"})
     if cfg.scene.kind == "heightfield":
         cfg = config_module.load(ROOT / "runs" / f"{run}.toml",
@@ -318,20 +339,25 @@ def main():
     parser.add_argument("--paths", type=int, default=200_000, help="paths of the traced batch")
     parser.add_argument("--run-paths", type=int, default=400_000, help="paths per incidence of the whole runs")
     parser.add_argument("--repeats", type=int, default=5, help="best of this many, for every figure")
+    parser.add_argument("--without-embreex", action="store_true",
+                        help="leave out the old backend (figure 1 and its whole runs): the grids against Embree alone")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
+    old = not args.without_embreex
     scenes = {}
     for run in args.scenes:
         start = time.perf_counter()
         cfg = load(run, args.run_paths)
-        figures = measure_scene(cfg, args.paths, args.repeats)
+        figures = measure_scene(cfg, args.paths, args.repeats, old)
         if cfg.scene.kind in ("micrograins", "heightfield"):
             figures["direct_ratio_absorbing"] = absorbing_floor(cfg, args.paths, args.repeats)
-        figures.update(measure_runs(cfg, args.run_paths, args.repeats))
-        figures["speedup_2_workers"] = figures["run_paths_per_s_old_2_workers"] / figures["run_paths_per_s_old_1_worker"]
+        figures.update(measure_runs(cfg, args.run_paths, args.repeats, old))
         figures["speedup_2_threads"] = figures["run_paths_per_s_new_2_threads"] / figures["run_paths_per_s_new_1_thread"]
-        figures["new_2_threads_over_old_2_workers"] = (figures["run_paths_per_s_new_2_threads"]
-                                                       / figures["run_paths_per_s_old_2_workers"])
+        if old:
+            figures["speedup_2_workers"] = (figures["run_paths_per_s_old_2_workers"]
+                                            / figures["run_paths_per_s_old_1_worker"])
+            figures["new_2_threads_over_old_2_workers"] = (figures["run_paths_per_s_new_2_threads"]
+                                                           / figures["run_paths_per_s_old_2_workers"])
         if "run_paths_per_s_grid_1_thread" in figures:
             figures["grid_speedup_2_threads"] = (figures["run_paths_per_s_grid_2_threads"]
                                                  / figures["run_paths_per_s_grid_1_thread"])
@@ -342,7 +368,9 @@ def main():
         report(label, figures)
         print(f"  ({time.perf_counter() - start:.0f} s for this scene)")
     chart(scenes)
-    if args.json:
+    if args.json and not old:
+        print(json.dumps({"scenes": scenes}))
+    elif args.json:
         main_scene = scenes.get("phi = 0.30") or next(iter(scenes.values()))
         print(json.dumps({
             "segments_per_s": main_scene["old_segments_per_s"], "raw_rays_per_s": main_scene["raw_embreex_rays_per_s"],
@@ -364,16 +392,19 @@ def scene_label(run: str) -> str:
 
 
 def report(label: str, f: dict) -> None:
+    old = "old_segments" in f
+    segments = f"{f['new_segments']} / {f['old_segments']}" if old else f"{f['new_segments']}"
     if f["spheres"]:
-        print(f"{label}: {f['spheres']} spheres (exact) / {f['triangles']} triangles (tessellated), "
-              f"{f['new_segments']} / {f['old_segments']} segments")
+        print(f"{label}: {f['spheres']} spheres (exact) / {f['triangles']} triangles (tessellated), {segments} segments")
     else:
-        print(f"{label}: {f['triangles']} triangles (both backends), "
-              f"{f['new_segments']} / {f['old_segments']} segments")
-    print(f"  raw Embree          embreex {f['raw_embreex_rays_per_s'] / 1e6:6.3f} M rays/s (triangles)   "
-          f"direct {f['raw_direct_rays_per_s'] / 1e6:6.3f} M rays/s ({'spheres' if f['spheres'] else 'triangles'})")
-    print(f"  old backend 1 thr   {f['old_segments_per_s'] / 1e6:6.3f} M segments/s, {f['old_paths_per_s'] / 1e3:7.1f} k paths/s,"
-          f" ratio {f['old_ratio']:.3f}, outside Embree {f['old_outside_embree_ns_per_segment']:.1f} ns/segment")
+        print(f"{label}: {f['triangles']} triangles (both backends), {segments} segments")
+    if old:
+        print(f"  raw Embree          embreex {f['raw_embreex_rays_per_s'] / 1e6:6.3f} M rays/s (triangles)")
+        print(f"  old backend 1 thr   {f['old_segments_per_s'] / 1e6:6.3f} M segments/s, "
+              f"{f['old_paths_per_s'] / 1e3:7.1f} k paths/s, ratio {f['old_ratio']:.3f}, outside Embree "
+              f"{f['old_outside_embree_ns_per_segment']:.1f} ns/segment")
+    print(f"  raw Embree          direct {f['raw_direct_rays_per_s'] / 1e6:6.3f} M rays/s "
+          f"({'spheres' if f['spheres'] else 'triangles'})")
     for t in (1, 2):
         print(f"  new backend {t} thr   {f[f'new_segments_per_s_{t}_threads'] / 1e6:6.3f} M segments/s, "
               f"{f[f'new_paths_per_s_{t}_threads'] / 1e3:7.1f} k paths/s")
@@ -381,7 +412,7 @@ def report(label: str, f: dict) -> None:
           f"{f['direct_outside_embree_ns_per_segment']:.1f} ns/segment (raw direct "
           f"{1e9 / f['raw_direct_rays_per_s']:.1f} ns/ray)")
     if "grid_over_direct_per_thread" in f:
-        print(f"  sphere grid ({f['grid_cells']} cells of {f['grid_cell_side']:.2f} r) 1 thr "
+        print(f"  grid ({f['grid_cells']} cells of {f['grid_cell_side']:.3g}) 1 thr "
               f"{f['grid_segments_per_s_1_threads'] / 1e6:6.3f}, 2 thr {f['grid_segments_per_s_2_threads'] / 1e6:6.3f} "
               f"M segments/s; over the direct backend a thread: x{f['grid_over_direct_per_thread']:.2f} "
               f"({f['grid_ns_per_segment']:.0f} against {f['direct_ns_per_segment']:.0f} ns/segment)")
@@ -390,13 +421,15 @@ def report(label: str, f: dict) -> None:
               f"{f['grid_outside_walk_ns_per_segment']:.0f} ns/segment")
     if "direct_ratio_absorbing" in f:
         print(f"  the same with every surface absorbing (start, one query, absorb): {f['direct_ratio_absorbing']:.3f}")
-    print(f"  whole runs (k paths/s): old 1 worker {f['run_paths_per_s_old_1_worker'] / 1e3:.1f}, "
-          f"2 workers {f['run_paths_per_s_old_2_workers'] / 1e3:.1f} (x{f['speedup_2_workers']:.2f}); "
-          f"new 1 thread {f['run_paths_per_s_new_1_thread'] / 1e3:.1f}, 2 threads "
-          f"{f['run_paths_per_s_new_2_threads'] / 1e3:.1f} (x{f['speedup_2_threads']:.2f}); "
-          f"new 2 threads / old 2 workers = {f['new_2_threads_over_old_2_workers']:.2f}")
+    line = (f"new 1 thread {f['run_paths_per_s_new_1_thread'] / 1e3:.1f}, 2 threads "
+            f"{f['run_paths_per_s_new_2_threads'] / 1e3:.1f} (x{f['speedup_2_threads']:.2f})")
+    if old:
+        line = (f"old 1 worker {f['run_paths_per_s_old_1_worker'] / 1e3:.1f}, 2 workers "
+                f"{f['run_paths_per_s_old_2_workers'] / 1e3:.1f} (x{f['speedup_2_workers']:.2f}); {line}; "
+                f"new 2 threads / old 2 workers = {f['new_2_threads_over_old_2_workers']:.2f}")
+    print(f"  whole runs (k paths/s): {line}")
     if "grid_speedup_2_threads" in f:
-        print(f"  whole runs on the sphere grid (k paths/s): 1 thread {f['run_paths_per_s_grid_1_thread'] / 1e3:.1f} "
+        print(f"  whole runs on the grid (k paths/s): 1 thread {f['run_paths_per_s_grid_1_thread'] / 1e3:.1f} "
               f"(x{f['grid_over_new_run_1_thread']:.2f} the new backend's), 2 threads "
               f"{f['run_paths_per_s_grid_2_threads'] / 1e3:.1f} (x{f['grid_speedup_2_threads']:.2f})")
 
@@ -415,8 +448,8 @@ def chart(scenes: dict) -> None:
             ("raw direct (spheres; heightfield: triangles)", "raw_direct_rays_per_s"),
             ("new backend, 1 thread", "new_segments_per_s_1_threads"),
             ("new backend, 2 threads", "new_segments_per_s_2_threads"),
-            ("sphere grid, 1 thread", "grid_segments_per_s_1_threads"),
-            ("sphere grid, 2 threads", "grid_segments_per_s_2_threads")]
+            ("grid, 1 thread", "grid_segments_per_s_1_threads"),
+            ("grid, 2 threads", "grid_segments_per_s_2_threads")]
     for k, (label, key) in enumerate(bars):
         left.bar(x + (k - 3) * 0.12, [scenes[p].get(key, 0.0) / 1e6 for p in phis], 0.12, label=label)
     left.set_ylabel("M rays or segments / s")
@@ -425,8 +458,8 @@ def chart(scenes: dict) -> None:
     left.set_title("segments per second against raw Embree, same rays")
     runs = [("old, 1 worker", "run_paths_per_s_old_1_worker"), ("old, 2 workers", "run_paths_per_s_old_2_workers"),
             ("new, 1 thread", "run_paths_per_s_new_1_thread"), ("new, 2 threads", "run_paths_per_s_new_2_threads"),
-            ("sphere grid, 1 thread", "run_paths_per_s_grid_1_thread"),
-            ("sphere grid, 2 threads", "run_paths_per_s_grid_2_threads")]
+            ("grid, 1 thread", "run_paths_per_s_grid_1_thread"),
+            ("grid, 2 threads", "run_paths_per_s_grid_2_threads")]
     for k, (label, key) in enumerate(runs):
         right.bar(x + (k - 2.5) * 0.14, [scenes[p].get(key, 0.0) / 1e3 for p in phis], 0.14, label=label)
     right.set_ylabel("k paths / s (whole runs, builds included)")

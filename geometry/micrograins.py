@@ -66,15 +66,19 @@ import pydantic
 from pydantic import Field
 
 from microsim.core.schema import Section
+from microsim.geometry import sphere_cells
 from microsim.geometry.poisson_spheres import (
     EXACT_SPHERE_BYTES,
     MAX_SUBDIVISIONS,
     MIN_EXPECTED_OBJECTS,
     TRIANGLE_BYTES,
+    check_intersector,
+    intersector,
+    intersector_key,
     is_exact,
     level_for,
-    meshed_on_embreex,
     periodic_images,
+    spheres_for_backend,
     unit_icosphere,
 )
 from microsim.physics.boolean_model import grain_density, grain_extinction
@@ -120,9 +124,11 @@ class Config(Section):
     subdivisions: int | None = Field(None, ge=0, le=MAX_SUBDIVISIONS, description="icosphere level of each grain")
     mesh_error: float | None = Field(None, gt=0.0, le=0.5,
                                      description="largest mesh-to-grain distance, in the grain's own frame")
+    intersector: Literal["grid", "embree"] | None = intersector_key()
 
     @pydantic.model_validator(mode="after")
     def _one_beta(self):
+        check_intersector(self)
         given = [key for key in ("beta_x", "beta_y") if getattr(self, key) is not None]
         if self.beta is not None and given:
             raise ValueError(f"scene.beta: give either beta or beta_x + beta_y, not both (got beta and {given[0]})")
@@ -152,9 +158,10 @@ def check(config) -> None:
 
 
 def for_backend(config, backend: str):
-    """(config, note): exact grains are native spheres in a scaled frame, which the embreex
-    backend cannot trace: there they become icospheres."""
-    return meshed_on_embreex(config, backend, "grains")
+    """(config, note): the config as ``backend`` can trace it: the sphere grid walks exact grains
+    on either; with ``intersector = "embree"`` they are native spheres in a scaled frame, which
+    the embreex backend cannot trace: there they become icospheres."""
+    return spheres_for_backend(config, backend, "grains")
 
 
 def default_tile(beta_x: float, beta_y: float, theta_max_deg: float, density: float) -> tuple[float, bool]:
@@ -198,6 +205,7 @@ def resolve(config) -> dict:
         "base": config.base.kind if config.base is not None else "absorber",
         "z_top": model["vertex_radius"] + SLAB_MARGIN,
         "z_bottom": -SLAB_MARGIN,
+        "intersector": intersector(scene),
     }
 
 
@@ -224,7 +232,10 @@ def generate(resolved: dict, config, rng: np.random.Generator) -> Scene:
         add_meshed_grains(builder, all_centres, semi_axes, resolved["subdivisions"], config.material)
     builder.add_base_plane(0.0, config.base if config.base is not None else Absorber(kind="absorber"))
     info = dict(resolved, grains=int(count), grain_images=int(len(all_centres) - count))
-    return builder.build(resolved["z_top"], resolved["z_bottom"], info)
+    scene = builder.build(resolved["z_top"], resolved["z_bottom"], info)
+    if resolved["intersector"] == "grid":
+        scene.grid = sphere_cells.build(scene, sphere_cells.GRAIN_SIDE)
+    return scene
 
 
 def _upper_faces(level: int) -> np.ndarray:

@@ -113,9 +113,9 @@ FALLBACK_MESH_ERROR = 0.01
 SLAB_MARGIN = 1e-3
 
 
-#: what ``scene.intersector`` defaults to for exact spheres: the grid traced them 1.19-1.30 times
-#: as fast as Embree's native spheres a thread at phi 0.1-0.6 (docs/developer/performance.md,
-#: "Sphere scenes: a grid walk against Embree")
+#: what ``scene.intersector`` defaults to for exact spheres (and grains): the grid traced spheres
+#: 1.06-1.30 times as fast as Embree's native spheres a thread at phi 0.1-0.6, grains 1.31 times
+#: (docs/developer/performance.md, "Sphere scenes: a grid walk against Embree" and "... re-measured")
 DEFAULT_INTERSECTOR = "grid"
 
 
@@ -190,11 +190,11 @@ def for_backend(config, backend: str):
     return spheres_for_backend(config, backend)
 
 
-def spheres_for_backend(config, backend: str):
-    """:func:`for_backend` of the scenes of spheres that take ``intersector``."""
+def spheres_for_backend(config, backend: str, what: str = "spheres"):
+    """:func:`for_backend` of the scenes of spheres (or grains: ``what``) that take ``intersector``."""
     if intersector(config.scene) == "grid":
         return config, ""
-    return meshed_on_embreex(config, backend, "spheres")
+    return meshed_on_embreex(config, backend, what)
 
 
 def meshed_on_embreex(config, backend: str, what: str):
@@ -397,7 +397,7 @@ def with_cells(scene: Scene, resolved: dict) -> Scene:
     """``scene``, with the cells the sphere grid walks (:mod:`microsim.geometry.sphere_cells`) where
     its ``intersector`` is the grid."""
     if resolved.get("intersector") == "grid":
-        scene.grid = sphere_cells.build(scene, resolved["free_path"])
+        scene.grid = sphere_cells.build(scene, sphere_cells.void_side(scene, resolved["free_path"]))
     return scene
 
 

@@ -183,8 +183,9 @@ CHUNK_KERNELS = (
     ("microsim.tracer.integrators.medium", "trace_medium_chunks"),
 )
 #: every scene kind's example, and the examples of its other intersectors
-TYPED_EXAMPLES = [(kind, None) for kind in ("plane", "mesh", "micrograins", "halfspace_medium", "packed_spheres")] + [
-    ("poisson_spheres", "grid"), ("poisson_spheres", "embree"), ("heightfield", "grid"),
+TYPED_EXAMPLES = [(kind, None) for kind in ("plane", "mesh", "halfspace_medium", "packed_spheres")] + [
+    ("micrograins", "grid"), ("micrograins", "embree"), ("poisson_spheres", "grid"), ("poisson_spheres", "embree"),
+    ("heightfield", "grid"),
     ("heightfield", "triangles"), ("vcavities", "analytic"), ("vcavities", "embree")]
 
 

@@ -167,6 +167,24 @@ def walk(grid, o, d, end):
     return -1, end
 
 
+def first_hits(grid, origins, directions, tfar):
+    """(primitive or -1, t) of :func:`walk` on each ray (rows of ``origins``, ``directions`` and
+    ``tfar``, float32 as the tracer's queries are): a batch of queries replayed, as the tests and
+    the benchmarks replay the tracer's."""
+    prims, ts = np.empty(len(origins), np.int64), np.empty(len(origins))
+    fill_first_hits(grid, origins, directions, tfar, prims, ts)
+    return prims, ts
+
+
+@numba.njit(cache=True, error_model="numpy")
+def fill_first_hits(grid, origins, directions, tfar, prims, ts):
+    """:func:`first_hits` into ``prims`` and ``ts`` (a timed replay writes into arrays written before)."""
+    for k in range(len(origins)):
+        o = (np.float64(origins[k, 0]), np.float64(origins[k, 1]), np.float64(origins[k, 2]))
+        d = (np.float64(directions[k, 0]), np.float64(directions[k, 1]), np.float64(directions[k, 2]))
+        prims[k], ts[k] = walk(grid, o, d, np.float64(tfar[k]))
+
+
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def cell_hit(h, pixel, i, j, o, d):
     """(face, t) of the nearer of cell (i, j)'s two triangles on the ray (either side), (-1, inf)

@@ -1,17 +1,21 @@
 """The sphere-grid backend of the surface tracer: exact spheres met by walking a uniform grid.
 
 A scene of exact spheres traced with ``intersector = "grid"`` (geometry/poisson_spheres.py,
-geometry/packed_spheres.py) is the same spheres as Embree's native ones, its periodic images
-included, but no Embree scene is built: the slab [0, L_x) x [0, L_y) x [z_bottom, z_top] is cut
-into cells (:class:`SphereCells`, each listing every sphere that reaches into it), and a segment's
+geometry/packed_spheres.py, and the grains of geometry/micrograins.py) is the same spheres as
+Embree's native ones, its periodic images included, but no Embree scene is built: the slab
+[0, L_x) x [0, L_y) x [z_bottom, z_top] is cut into cells (:class:`SphereCells`, each listing
+every sphere that reaches into it), and a segment's
 first hit is found by walking the cells it crosses, in order (Amanatides and Woo's traversal),
 testing each listed sphere with the exact ray-sphere roots in float64 on the float64 centres (the
 shapes' own, where Embree has float32). As Embree does, a sphere is met at its nearer root at or
 beyond the origin, else at its farther one (from inside: a back face, which the path passes);
 the walk ends in the first cell whose exit lies beyond the nearest root found, or at the
-segment's end. A segment that meets no sphere meets the ``[base]``, if any. Segments start in
+segment's end. The ``[base]``, if any, is met where the segment reaches it before any sphere. Segments start in
 the tile and end at its sides (:func:`~.surface_transport.prepare_segment`), so the walk needs
-no wrap. The events are :mod:`.surface_transport`'s, as on the other backends; one path at a
+no wrap. Spheres that stand for ellipsoids (micrograins: the native spheres of the frame scaled by
+``scene.sphere_scale`` in x and y) are walked in that frame: the segment is mapped into it (the
+ray parameter t is the same in both frames) and the sphere's normal back by the inverse
+transpose, as Embree's instance does. The events are :mod:`.surface_transport`'s, as on the other backends; one path at a
 time; next-event estimation's shadow rays walk the same grid. The cell side: see
 geometry/sphere_cells.py; the speeds: docs/developer/performance.md, "Sphere scenes: a grid
 walk against Embree".
@@ -49,7 +53,8 @@ class SphereCells(NamedTuple):
     z, r of each listed sphere, cell after cell (``starts`` (cells + 1,) into it; cell (a, b, k)
     is number (a counts[1] + b) counts[2] + k), ``prims`` (E,) the primitive each is in the scene;
     ``counts`` (3,) the cells along x, y, z and ``side`` (3,) their sides, from the corner
-    (0, 0, ``z_low``); the [base]'s height and primitive (-1: no base)."""
+    (0, 0, ``z_low``); the [base]'s height and primitive (-1: no base); ``scale`` (2,) the x and
+    y factors of the spheres' frame (1, 1: the world's)."""
 
     spheres: np.ndarray
     prims: np.ndarray
@@ -59,6 +64,7 @@ class SphereCells(NamedTuple):
     z_low: float
     base_z: float
     base_prim: int
+    scale: np.ndarray
 
 
 class SphereGridWorld(NamedTuple):
@@ -71,7 +77,7 @@ class SphereGridWorld(NamedTuple):
 def empty_cells() -> SphereCells:
     """A grid of one empty cell: what the kernels are compiled on."""
     return SphereCells(np.zeros((0, 4)), np.zeros(0, np.int64), np.zeros(2, np.int64), np.ones(3, np.int64),
-                       np.ones(3), 0.0, -math.inf, -1)
+                       np.ones(3), 0.0, -math.inf, -1, np.ones(2))
 
 
 def backend(scene, threads: int, estimators):
@@ -123,10 +129,19 @@ def trace_chunks(first, start, stop, beam, world, setups, work):
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def segment_hit(cells, rays, i):
     """(primitive or -1, t, outward normal) of the first sphere (or the base) the segment in row i
-    meets, the ray in float32 as Embree would take it, up to its tfar."""
-    o = (np.float64(rays.origin[i, 0]), np.float64(rays.origin[i, 1]), np.float64(rays.origin[i, 2]))
-    d = (np.float64(rays.direction[i, 0]), np.float64(rays.direction[i, 1]), np.float64(rays.direction[i, 2]))
-    return walk(cells, o, d, np.float64(rays.tfar[i]))
+    meets, the ray in float32 as Embree would take it, up to its tfar; in the spheres' frame,
+    the normal mapped back to the world's (module doc)."""
+    o, d = in_frame(cells.scale, rays.origin[i], rays.direction[i])
+    prim, t, n = walk(cells, o, d, np.float64(rays.tfar[i]))
+    return prim, t, (n[0] * cells.scale[0], n[1] * cells.scale[1], n[2])
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def in_frame(scale, origin, direction):
+    """(o, d) in float64 of a float32 ray, mapped into the frame scaled by ``scale`` in x and y."""
+    o = (np.float64(origin[0]) * scale[0], np.float64(origin[1]) * scale[1], np.float64(origin[2]))
+    d = (np.float64(direction[0]) * scale[0], np.float64(direction[1]) * scale[1], np.float64(direction[2]))
+    return o, d
 
 
 @numba.njit(cache=True, error_model="numpy", _nrt=False)
@@ -163,30 +178,33 @@ def walk(cells, o, d, end):
             next_z += delta_z
             if iz < 0 or iz >= nz:
                 break
+    if cells.base_prim >= 0 and d[2] < 0.0:
+        t = (cells.base_z - o[2]) / d[2]
+        if 0.0 <= t <= end and t < best:  # the base before any sphere (grains' lower halves lie under it)
+            return cells.base_prim, t, (0.0, 0.0, 1.0)
     if best <= end:
         s = cells.spheres[best_entry]
         r = 1.0 / s[3]
         normal = ((o[0] + best * d[0] - s[0]) * r, (o[1] + best * d[1] - s[1]) * r, (o[2] + best * d[2] - s[2]) * r)
         return cells.prims[best_entry], best, normal
-    if cells.base_prim >= 0 and d[2] < 0.0:
-        t = (cells.base_z - o[2]) / d[2]
-        if 0.0 <= t <= end:
-            return cells.base_prim, t, (0.0, 0.0, 1.0)
     return -1, end, (0.0, 0.0, 1.0)
 
 
-@numba.njit(cache=True, error_model="numpy")
 def first_hits(cells, origins, directions, tfar):
     """(primitive or -1, t) of :func:`walk` on each ray (rows of ``origins``, ``directions`` and
-    ``tfar``, float32 as the tracer's queries are): a batch of queries replayed, as the tests and
-    the throughput benchmark replay the tracer's."""
-    n = len(origins)
-    prims, ts = np.empty(n, np.int64), np.empty(n)
-    for k in range(n):
-        o = (np.float64(origins[k, 0]), np.float64(origins[k, 1]), np.float64(origins[k, 2]))
-        d = (np.float64(directions[k, 0]), np.float64(directions[k, 1]), np.float64(directions[k, 2]))
-        prims[k], ts[k], _ = walk(cells, o, d, np.float64(tfar[k]))
+    ``tfar``, float32 as the tracer's queries are, in the world's frame): a batch of queries
+    replayed, as the tests and the throughput benchmark replay the tracer's."""
+    prims, ts = np.empty(len(origins), np.int64), np.empty(len(origins))
+    fill_first_hits(cells, origins, directions, tfar, prims, ts)
     return prims, ts
+
+
+@numba.njit(cache=True, error_model="numpy")
+def fill_first_hits(cells, origins, directions, tfar, prims, ts):
+    """:func:`first_hits` into ``prims`` and ``ts`` (a timed replay writes into arrays written before)."""
+    for k in range(len(origins)):
+        o, d = in_frame(cells.scale, origins[k], directions[k])
+        prims[k], ts[k], _ = walk(cells, o, d, np.float64(tfar[k]))
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

@@ -5,7 +5,7 @@ Its paths and events are :mod:`.surface_transport`'s kernels; its two backends, 
 calls Embree, paths run to completion, threads) and :mod:`.embreex` (one embreex call per
 segment of all live paths). A scene that carries a grid (``Scene.grid``, with ``intersector =
 "grid"``) is walked instead, whichever backend is named: a heightfield's height grid by :mod:`.grid`,
-exact spheres' cells by :mod:`.sphere_grid`.
+exact spheres' (and grains') cells by :mod:`.sphere_grid`.
 """
 
 from __future__ import annotations
@@ -87,7 +87,7 @@ class SurfaceTracer:
         estimators = build(DEFAULT, sensor) if estimators is None else estimators
         module = backend_module(backend)
         if scene is not None and scene.get("intersector") == "grid":
-            module = sphere_grid if scene.get("sphere_model") == "exact" else grid
+            module = grid if scene.get("kind") == "heightfield" else sphere_grid  # spheres' or grains' cells
         module.compile_kernels(beam, builder.build(1.0, -1.0, {}), setups(estimators, beam.wi, 0.0), estimators)
 
 
