@@ -315,8 +315,8 @@ def _copies(tile: Tile):
     """(shift (dx, dy), which faces, moved by dx L_x and dy L_y, reach within BASE_MARGIN of the
     tile) for the shifts by a period either way in x and y, in the order :func:`build` lays them."""
     sides = np.array(tile.sides)
-    corners = tile.vertices[tile.faces][:, :, :2]
-    high, low = corners.max(axis=1), corners.min(axis=1)  # (F, 2): a face's bounds in x and y
+    a, b, c = (tile.vertices[tile.faces[:, k], :2] for k in range(3))
+    high, low = np.maximum(np.maximum(a, b), c), np.minimum(np.minimum(a, b), c)  # (F, 2): a face's bounds in x, y
     margin = BASE_MARGIN * sides
 
     def reaching(axis: int, k: int) -> np.ndarray:
@@ -373,7 +373,7 @@ def build(tile: Tile, resolved: dict, material, base) -> Scene:
     n = len(triangles)
     size = float(np.sqrt(np.mean(tile.areas)))
     shapes = Shapes.smooth_triangles(triangles, normals, size) if smooth else \
-        Shapes.planes(triangles.mean(axis=1), normals, size)
+        Shapes.planes((triangles[:, 0] + triangles[:, 1] + triangles[:, 2]) / 3.0, normals, size)  # mean(axis=1), faster
     builder = SceneBuilder(*tile.sides)
     builder.add(triangles.reshape(-1, 3).astype(np.float32), np.arange(3 * n, dtype=np.int32).reshape(n, 3),
                 np.arange(n, dtype=np.int32), shapes, material)

@@ -75,6 +75,38 @@ def test_the_rows_two_chunks_write_share_no_cache_line():
             assert not lines(array, slots) & lines(array, after)
 
 
+#: in a process of its own (a forked worker that waits on a pool thread it does not have would hang
+#: the suite): two runs on two threads start no thread for the second, and workers forked after it
+#: trace on two threads of their own, the same table bit for bit
+ONE_POOL = """
+import threading
+from microsim import config
+from microsim.testing import trace
+cfg = config.validate({"scene": {"kind": "halfspace_medium", "phase": "isotropic"},
+                       "material": {"kind": "lambert", "albedo": 0.8}, "illumination": {"theta_i_deg": [0.0, 60.0]},
+                       "sensor": {"cells": 24}, "run": {"paths": 160_000, "realizations": 4, "seed": 7}})
+first = trace(cfg, threads=2)
+started, start = [], threading.Thread.start
+threading.Thread.start = lambda thread: (started.append(thread.name), start(thread))[1]
+second = trace(cfg, threads=2)
+threading.Thread.start = start
+assert not started, started
+forked = trace(cfg, workers=2, threads=2)
+for other in (second, forked):
+    for a, b in zip(first.brdf + first.albedo, other.brdf + other.albedo):
+        assert a.total.tobytes() == b.total.tobytes() and a.squares.tobytes() == b.squares.tobytes()
+print("ok")
+"""
+
+
+def test_threads_share_one_pool_for_the_process_and_a_forked_worker_starts_its_own():
+    """A run's units trace on one pool of threads that lives with the process (starting threads
+    for each unit cost 6 % of a two-thread run), and a worker forked after it does not wait on a
+    thread it has not got."""
+    done = subprocess.run([sys.executable, "-c", ONE_POOL], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr[-2000:]
+
+
 def unavailable(*args):
     raise embree.EmbreeUnavailable("no library here")
 

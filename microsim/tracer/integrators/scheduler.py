@@ -12,12 +12,17 @@ for any thread count.
 
 Python threads rather than a numba ``prange``: numba's parallel loops take no tuples of arrays
 (the named bundles), and its OpenMP layer is not fork-safe (the runner forks worker processes
-after compiling). Chunk and wave sizes, and what they cost: docs/developer/performance.md.
+after compiling). The calling thread traces the first share and a pool of ``threads - 1``
+threads the others; the pool lives as long as the process (a run traces a unit at a time, and
+starting two threads for each took 6 % of a two-thread run of runs/spheres_phi030.toml), and a
+forked child starts a pool of its own. Chunk and wave sizes, and what they cost:
+docs/developer/performance.md.
 """
 
 from __future__ import annotations
 
 import math
+import os
 from collections import namedtuple
 from concurrent.futures import ThreadPoolExecutor
 
@@ -96,17 +101,32 @@ def trace_in_waves(beam, estimators, threads: int, work: Workspace, trace_share)
     n_chunks = math.ceil(beam.n_paths / CHUNK_PATHS)
     wave_chunks = WAVE_CHUNKS_PER_THREAD * threads
     total = empty_tally(beam.n_paths, estimators, beam.albedo_scale)
-    with ThreadPoolExecutor(threads) as pool:
-        for first in range(0, n_chunks, wave_chunks):
-            count = min(wave_chunks, n_chunks - first)
-            clear_rows(work, count)
-            shares = [(first, a, b) for a, b in thread_shares(first, count, beam.n_paths, threads) if b > a]
-            if len(shares) == 1:
-                trace_share(*shares[0])  # one share: no hand-over to a pool thread
-            else:
-                list(pool.map(lambda share: trace_share(*share), shares))
-            add_rows(total, work.estimates, work.energy, work.counts, count)
+    for first in range(0, n_chunks, wave_chunks):
+        count = min(wave_chunks, n_chunks - first)
+        clear_rows(work, count)
+        shares = [(first, a, b) for a, b in thread_shares(first, count, beam.n_paths, threads) if b > a]
+        handed = [pool(threads).submit(trace_share, *share) for share in shares[1:]]
+        try:
+            trace_share(*shares[0])  # this thread's share, the others' on the pool
+        finally:
+            for future in handed:  # every share ends before its rows are read, or the run fails
+                future.result()
+        add_rows(total, work.estimates, work.energy, work.counts, count)
     return total
+
+
+#: this process's pools: threads -> a pool of threads - 1 threads (module doc)
+_POOLS: dict = {}
+
+
+def pool(threads: int) -> ThreadPoolExecutor:
+    """The pool of ``threads - 1`` threads that trace a wave's shares beside the calling thread."""
+    if threads not in _POOLS:
+        _POOLS[threads] = ThreadPoolExecutor(threads - 1, thread_name_prefix="microsim-trace")
+    return _POOLS[threads]
+
+
+os.register_at_fork(after_in_child=_POOLS.clear)  # a forked child has none of its parent's threads
 
 
 def thread_shares(first: int, count: int, n_paths: int, threads: int) -> list[tuple[int, int]]:
