@@ -199,7 +199,7 @@ def facet_albedo(gaf, distribution, ax, ay, wi, rule):
     o = 2.0 * im[:, None] * m - wi
     ok = (o[:, 2] > 0.0) & (im > 0.0)
     o = np.where(ok[:, None], o, np.array([0.0, 0.0, 1.0]))
-    g = nd.masking_shadowing(gaf, distribution, ax, ay, np.broadcast_to(wi, o.shape), o, m)
+    g = nd.masking_shadowing(gaf, distribution, ax, ay, wi, o, m)
     return float(np.sum(np.where(ok, g * im / (wi[2] * m[:, 2]), 0.0) * weight))
 
 

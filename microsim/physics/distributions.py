@@ -213,11 +213,11 @@ def gaf_array(gaf_code, lambda_i, lambda_o, wi_z, wo_z, m_z, wi_m, wo_m):
 
 def masking_shadowing(gaf: str, distribution: str, roughness_x: float, roughness_y: float, wi, wo, m) -> np.ndarray:
     """G(wi, wo, m) of ``gaf`` for facet normals m; all arguments (..., 3), broadcasting."""
-    wi, wo, m = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (wi, wo, m)))
+    wi, wo, m = (np.asarray(a, dtype=np.float64) for a in (wi, wo, m))
     code = GAFS.index(gaf)
     if code == 2:
-        lam_i = lam_o = np.zeros(wi.shape[:-1])
-    else:
+        lam_i = lam_o = 0.0
+    else:  # each Lambda on its own directions; the ufunc broadcasts
         lam_i = smith_lambda(distribution, roughness_x, roughness_y, wi)
         lam_o = smith_lambda(distribution, roughness_x, roughness_y, wo)
     wi_m = np.sum(wi * m, axis=-1)
@@ -276,11 +276,13 @@ def sample(distribution: str, roughness_x: float, roughness_y: float, xi1, xi2) 
     """
     xi1 = np.asarray(xi1, dtype=np.float64)
     xi2 = np.asarray(xi2, dtype=np.float64)
+    if distribution == "gaussian":  # the tilt inverted on xi1's own values, before they are broadcast
+        theta = _gaussian_theta(roughness_x, xi1)
+        theta, xi2 = np.broadcast_arrays(theta, xi2)
     xi1, xi2 = np.broadcast_arrays(xi1, xi2)
     psi = 2.0 * math.pi * xi2
     phi = np.arctan2(roughness_y * np.sin(psi), roughness_x * np.cos(psi))
     if distribution == "gaussian":
-        theta = _gaussian_theta(roughness_x, xi1)
         sin_t, cos_t = np.sin(theta), np.cos(theta)
     else:
         inv_a2 = (np.cos(phi) / roughness_x) ** 2 + (np.sin(phi) / roughness_y) ** 2
