@@ -16,9 +16,14 @@ import tempfile
 
 import pytest
 
-from microsim import tables
-from microsim.run import runner
-from microsim.testing.tables import trace_table
+# Each process of the suite (an xdist worker, a run it starts) is one of two on two cores:
+# OpenBLAS's own threads (two a process by default) in both workers at once spin against each
+# other, and the model tests ran 1.7 times slower for it. Set before numpy is first imported.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+from microsim import tables  # noqa: E402
+from microsim.run import runner  # noqa: E402
+from microsim.testing.tables import trace_table  # noqa: E402
 
 #: paths from which a test is marked slow (the README: ``-m "not slow"`` leaves them out)
 SLOW_PATHS = 1_000_000
