@@ -276,14 +276,13 @@ def sample(distribution: str, roughness_x: float, roughness_y: float, xi1, xi2) 
     """
     xi1 = np.asarray(xi1, dtype=np.float64)
     xi2 = np.asarray(xi2, dtype=np.float64)
-    if distribution == "gaussian":  # the tilt inverted on xi1's own values, before they are broadcast
+    if distribution == "gaussian":  # the tilt depends on xi1 alone: taken on its own values
         theta = _gaussian_theta(roughness_x, xi1)
-        theta, xi2 = np.broadcast_arrays(theta, xi2)
     xi1, xi2 = np.broadcast_arrays(xi1, xi2)
     psi = 2.0 * math.pi * xi2
     phi = np.arctan2(roughness_y * np.sin(psi), roughness_x * np.cos(psi))
     if distribution == "gaussian":
-        sin_t, cos_t = np.sin(theta), np.cos(theta)
+        sin_t, cos_t = (np.broadcast_to(f(theta), xi1.shape) for f in (np.sin, np.cos))
     else:
         inv_a2 = (np.cos(phi) / roughness_x) ** 2 + (np.sin(phi) / roughness_y) ** 2
         if distribution == "beckmann":
