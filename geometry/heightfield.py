@@ -32,6 +32,7 @@ import hashlib
 import math
 from typing import Literal
 
+import numba
 import numpy as np
 import pydantic
 from pydantic import Field
@@ -185,18 +186,32 @@ def triangulate(h: np.ndarray, pixel: float) -> tuple[np.ndarray, np.ndarray]:
     along its diagonal from (i, j) to (i + 1, j + 1) where i + j is even, along the other one
     where it is odd (microsim.geometry.gaussian_surface: the facets' slopes along x and y are then not
     correlated on average)."""
+    return _triangulate(np.ascontiguousarray(h, np.float64), float(pixel))
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _triangulate(h, pixel):
+    """:func:`triangulate`: vertex (i, j) at row i (n + 1) + j; the first triangles of the cells
+    in row-major order, then the second ones."""
     n = len(h)
-    wrapped = np.pad(h, ((0, 1), (0, 1)), mode="wrap")
-    x = np.arange(n + 1) * pixel
-    gx, gy = np.meshgrid(x, x, indexing="ij")
-    vertices = np.column_stack([gx.ravel(), gy.ravel(), wrapped.ravel()])
-    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    a = (i * (n + 1) + j).ravel()  # corner (i, j); b (i + 1, j), c (i + 1, j + 1), d (i, j + 1)
-    b, c, d = a + n + 1, a + n + 2, a + 1
-    even = ((i + j) % 2 == 0).ravel()
-    first = np.where(even[:, None], np.column_stack([a, b, c]), np.column_stack([a, b, d]))
-    second = np.where(even[:, None], np.column_stack([a, c, d]), np.column_stack([b, c, d]))
-    return vertices, np.concatenate([first, second])
+    vertices = np.empty(((n + 1) * (n + 1), 3))
+    for i in range(n + 1):
+        for j in range(n + 1):
+            v = i * (n + 1) + j
+            vertices[v, 0], vertices[v, 1], vertices[v, 2] = i * pixel, j * pixel, h[i % n, j % n]
+    faces = np.empty((2 * n * n, 3), np.int64)
+    for i in range(n):
+        for j in range(n):
+            cell = i * n + j
+            a = i * (n + 1) + j  # corner (i, j); b (i + 1, j), c (i + 1, j + 1), d (i, j + 1)
+            b, c, d = a + n + 1, a + n + 2, a + 1
+            if (i + j) % 2 == 0:
+                faces[cell, 0], faces[cell, 1], faces[cell, 2] = a, b, c
+                faces[n * n + cell, 0], faces[n * n + cell, 1], faces[n * n + cell, 2] = a, c, d
+            else:
+                faces[cell, 0], faces[cell, 1], faces[cell, 2] = a, b, d
+                faces[n * n + cell, 0], faces[n * n + cell, 1], faces[n * n + cell, 2] = b, c, d
+    return vertices, faces
 
 
 def load(config) -> tuple[Tile, str]:

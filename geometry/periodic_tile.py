@@ -30,14 +30,16 @@ distributions are).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from microsim.core import files
 from microsim.tracer.scene import BASE_MARGIN, Scene, SceneBuilder
-from microsim.tracer.shapes import N_PARAMS, SMOOTH_PARAMS, Shapes
+from microsim.tracer.shapes import N_PARAMS, SMOOTH_PARAMS, Shapes, set_plane_row
 
 #: paths start and leave this fraction of the longer side above the highest point
 TOP_HEIGHT = 1e-2
@@ -69,6 +71,7 @@ class Tile:
     areas: np.ndarray
     period: float
     period_y: float | None = None
+    reaching: np.ndarray | None = None  # which faces each copy of :func:`build` lays, once found
 
     def __post_init__(self):
         if self.period_y is None:
@@ -82,10 +85,28 @@ class Tile:
     @classmethod
     def of(cls, vertices, faces, period: float, period_y: float | None = None) -> "Tile":
         """The tile of triangles known to be one period of a surface (no checks: :func:`checked`)."""
-        corners = vertices[faces]
-        cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-        doubled = np.linalg.norm(cross, axis=1)
-        return cls(vertices, faces.astype(np.int32), cross / doubled[:, None], 0.5 * doubled, period, period_y)
+        vertices, faces = np.ascontiguousarray(vertices, np.float64), np.ascontiguousarray(faces, np.int32)
+        normals, doubled = _facets(vertices, faces)
+        return cls(vertices, faces, normals, 0.5 * doubled, period, period_y)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _facets(vertices, faces):
+    """(unit normals (F, 3), doubled areas (F,)) of the faces: the cross product (b - a) x (c - a)
+    of each face's corners a, b, c and its length, bit for bit as ``np.cross`` and
+    ``np.linalg.norm(axis=1)`` give them (a degenerate face: NaN normal, length 0)."""
+    normals = np.empty((len(faces), 3))
+    doubled = np.empty(len(faces))
+    for f in range(len(faces)):
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        ax, ay, az = vertices[a, 0], vertices[a, 1], vertices[a, 2]
+        e1x, e1y, e1z = vertices[b, 0] - ax, vertices[b, 1] - ay, vertices[b, 2] - az
+        e2x, e2y, e2z = vertices[c, 0] - ax, vertices[c, 1] - ay, vertices[c, 2] - az
+        cx, cy, cz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+        length = math.sqrt(cx * cx + cy * cy + cz * cz)
+        normals[f, 0], normals[f, 1], normals[f, 2] = cx / length, cy / length, cz / length
+        doubled[f] = length
+    return normals, doubled
 
 
 def source(config) -> tuple[str, Path]:
@@ -236,9 +257,9 @@ def summary(tile: Tile) -> dict:
     the x side, ``period_y``), area, mean cosine, RMS slope, the heights paths start at and a base
     lies at (offsets in units of the longer side)."""
     z = tile.vertices[:, 2]
-    up = tile.normals[:, 2] > 0.0
-    weight = tile.areas[up] * tile.normals[up, 2]
-    slope2 = (1.0 - tile.normals[up, 2] ** 2) / tile.normals[up, 2] ** 2
+    normals, areas = _facing_up(tile)
+    weight = areas * normals[:, 2]
+    slope2 = (1.0 - normals[:, 2] ** 2) / normals[:, 2] ** 2
     longer = max(tile.sides)
     return {"period": tile.period, "period_y": tile.period_y, "tile": tile.period,
             "surface_triangles": len(tile.faces), "area": float(tile.areas.sum()),
@@ -269,10 +290,17 @@ def steepness_note(resolved: dict) -> str | None:
 def roughness(tile: Tile) -> tuple[float, float]:
     """The facets' Beckmann alpha along x and y: sqrt(2 <slope^2>), the mean over the projected
     area of the facets that face up (as :func:`summary`'s rms_slope)."""
-    up = tile.normals[:, 2] > 0.0
-    weight = tile.areas[up] * tile.normals[up, 2]
-    slopes = -tile.normals[up, :2] / tile.normals[up, 2:3]
+    normals, areas = _facing_up(tile)
+    weight = areas * normals[:, 2]
+    slopes = -normals[:, :2] / normals[:, 2:3]
     return tuple(float(np.sqrt(2.0 * np.sum(weight * slopes[:, k] ** 2) / weight.sum())) for k in (0, 1))
+
+
+def _facing_up(tile: Tile) -> tuple[np.ndarray, np.ndarray]:
+    """(normals, areas) of the facets that face up: the tile's own arrays where all of them do
+    (a heightfield's), not copied."""
+    up = tile.normals[:, 2] > 0.0
+    return (tile.normals, tile.areas) if up.all() else (tile.normals[up], tile.areas[up])
 
 
 def for_backend(config, backend: str):
@@ -311,35 +339,83 @@ def corner_normals(tile: Tile) -> np.ndarray:
     return np.where(cancelled[:, :, None], tile.normals[:, None, :], summed / np.where(length > 0.0, length, 1.0))
 
 
-def _copies(tile: Tile):
-    """(shift (dx, dy), which faces, moved by dx L_x and dy L_y, reach within BASE_MARGIN of the
-    tile) for the shifts by a period either way in x and y, in the order :func:`build` lays them."""
-    sides = np.array(tile.sides)
-    a, b, c = (tile.vertices[tile.faces[:, k], :2] for k in range(3))
-    high, low = np.maximum(np.maximum(a, b), c), np.minimum(np.minimum(a, b), c)  # (F, 2): a face's bounds in x, y
-    margin = BASE_MARGIN * sides
+#: the copies :func:`build` lays, in order: shifts by (dx L_x, dy L_y), dx major
+SHIFTS = tuple((dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1))
+OWN = SHIFTS.index((0, 0))
 
-    def reaching(axis: int, k: int) -> np.ndarray:
-        """Faces that, moved by k periods along ``axis``, reach within the margin of the tile."""
-        shift = k * sides[axis]
-        return (high[:, axis] + shift >= -margin[axis]) & (low[:, axis] + shift <= sides[axis] + margin[axis])
 
-    near = [[reaching(axis, k) for k in (-1, 0, 1)] for axis in (0, 1)]
-    for dx in (-1, 0, 1):
-        for dy in (-1, 0, 1):
-            yield (dx, dy), near[0][dx + 1] & near[1][dy + 1]
+def _reaching(tile: Tile) -> np.ndarray:
+    """(F, 9) bool: which faces, moved by each of SHIFTS, reach within BASE_MARGIN of the tile
+    (found once a tile: :func:`build` and :func:`first_own_face` both ask)."""
+    if tile.reaching is None:
+        sides = np.array(tile.sides)
+        tile.reaching = _reach(tile.vertices, tile.faces, sides, BASE_MARGIN * sides)
+    return tile.reaching
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _reach(vertices, faces, sides, margins):
+    """:func:`_reaching`: a face moved by k periods along an axis reaches the tile where its bounds
+    along that axis, moved, overlap [-margin, side + margin]."""
+    near = np.empty((len(faces), 9), np.bool_)
+    along = np.empty((2, 3), np.bool_)
+    for f in range(len(faces)):
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        for axis in range(2):
+            high = max(max(vertices[a, axis], vertices[b, axis]), vertices[c, axis])
+            low = min(min(vertices[a, axis], vertices[b, axis]), vertices[c, axis])
+            for k in range(3):
+                shift = (k - 1) * sides[axis]
+                along[axis, k] = high + shift >= -margins[axis] and low + shift <= sides[axis] + margins[axis]
+        for s in range(9):
+            near[f, s] = along[0, s // 3] and along[1, s % 3]
+    return near
 
 
 def first_own_face(tile: Tile) -> int:
     """The scene's index of the tile's own face 0 as :func:`build` lays them (after the copies
     shifted by (-1, *) and (0, -1)); every face of the tile itself is laid, in order."""
-    start = 0
-    for shift, near in _copies(tile):
-        if shift == (0, 0):
-            if not near.all():
-                raise ValueError("faces of the tile lie beyond it: its own faces are not laid in order")
-            return start
-        start += int(np.count_nonzero(near))
+    near = _reaching(tile)
+    if not near[:, OWN].all():
+        raise ValueError("faces of the tile lie beyond it: its own faces are not laid in order")
+    return int(np.count_nonzero(near[:, :OWN]))
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _lay(vertices, faces, normals, near, sides, smooth):
+    """The faces of each shift of SHIFTS that reach the tile (``near``), in that order, each moved
+    by its shift: (their vertices as float32 (3 n, 3), the face each is a copy of (n,), and either
+    their corners in float64 (n, 3, 3) with ``smooth``, or the PLANE shape rows of flat facets
+    through their centres facing ``normals``, (n, N_PARAMS))."""
+    n = 0
+    for f in range(len(faces)):
+        for s in range(9):
+            n += near[f, s]
+    laid = np.empty((3 * n, 3), np.float32)
+    source = np.empty(n, np.int32)
+    corners = np.empty((n if smooth else 0, 3, 3))
+    planes = np.zeros((0 if smooth else n, N_PARAMS))
+    corner = np.empty((3, 3))
+    j = 0
+    for s in range(9):
+        shift = ((s // 3 - 1) * sides[0], (s % 3 - 1) * sides[1], 0.0)
+        for f in range(len(faces)):
+            if not near[f, s]:
+                continue
+            for k in range(3):
+                for axis in range(3):
+                    corner[k, axis] = vertices[faces[f, k], axis] + shift[axis]
+                    laid[3 * j + k, axis] = corner[k, axis]
+            if smooth:
+                corners[j] = corner
+            else:
+                x = (corner[0, 0] + corner[1, 0] + corner[2, 0]) / 3.0
+                y = (corner[0, 1] + corner[1, 1] + corner[2, 1]) / 3.0
+                z = (corner[0, 2] + corner[1, 2] + corner[2, 2]) / 3.0
+                set_plane_row(planes[j], x, y, z, normals[f, 0], normals[f, 1], normals[f, 2])
+            source[j] = f
+            j += 1
+    return laid, source, corners, planes
 
 
 def _welded(vertices, sides, distance: float) -> np.ndarray:
@@ -364,19 +440,14 @@ def build(tile: Tile, resolved: dict, material, base) -> Scene:
     the sides (module doc); flat facets, or smooth ones where ``resolved["shading"]`` says so;
     ``base`` (a material, or None) under it."""
     smooth = resolved.get("shading") == SMOOTH_SHADING
-    shading = corner_normals(tile) if smooth else tile.normals
-    corners, sides = tile.vertices[tile.faces], tile.sides
-    parts = [(corners[near] + np.array([dx * sides[0], dy * sides[1], 0.0]), shading[near])
-             for (dx, dy), near in _copies(tile)]
-    triangles = np.concatenate([p[0] for p in parts])
-    normals = np.concatenate([p[1] for p in parts])
-    n = len(triangles)
+    laid, source, corners, planes = _lay(tile.vertices, tile.faces, tile.normals, _reaching(tile), np.array(tile.sides),
+                                         smooth)
+    n = len(source)
     size = float(np.sqrt(np.mean(tile.areas)))
-    shapes = Shapes.smooth_triangles(triangles, normals, size) if smooth else \
-        Shapes.planes((triangles[:, 0] + triangles[:, 1] + triangles[:, 2]) / 3.0, normals, size)  # mean(axis=1), faster
+    shapes = Shapes.smooth_triangles(corners, corner_normals(tile)[source], size) if smooth else \
+        Shapes.planes_of_rows(planes, size)
     builder = SceneBuilder(*tile.sides)
-    builder.add(triangles.reshape(-1, 3).astype(np.float32), np.arange(3 * n, dtype=np.int32).reshape(n, 3),
-                np.arange(n, dtype=np.int32), shapes, material)
+    builder.add(laid, np.arange(3 * n, dtype=np.int32).reshape(n, 3), np.arange(n, dtype=np.int32), shapes, material)
     if base is not None:
         builder.add_base_plane(resolved["base_z"], base)
     return builder.build(resolved["z_top"], resolved["z_bottom"], {"copies": n - len(tile.faces)})

@@ -95,7 +95,7 @@ def _images(centre, r, lo, sides, periodic, counts):
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _count_entries(centres, radii, lo, sides, periodic, counts):
     listed = np.zeros(counts[0] * counts[1] * counts[2], np.int64)
     for i in range(len(centres)):
@@ -104,7 +104,7 @@ def _count_entries(centres, radii, lo, sides, periodic, counts):
     return listed
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _fill_entries(centres, radii, lo, sides, periodic, counts, starts):
     entries = np.empty((starts[-1], 4))
     owners = np.empty(starts[-1], np.int64)

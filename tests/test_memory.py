@@ -1,12 +1,15 @@
 """Memory does not grow with ``paths``, and a run that cannot fit is refused before it starts."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from microsim import config, tables
 from microsim.cli import main
 from microsim.physics.rng import geometry_rng
-from microsim.run.memory import available_memory, memory_estimate
+from microsim.run import memory
+from microsim.run.memory import available_memory, check_memory, memory_estimate
 from microsim.run.plan import Plan
 from microsim.tracer.integrators import embreex
 from microsim.tracer.integrators.surface import SurfaceTracer
@@ -55,3 +58,13 @@ def test_a_run_that_cannot_fit_is_refused_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and err[0].startswith("microsim: error: this run needs about ") and "GiB are free" in err[0]
     assert not out.exists()
+
+
+def test_two_threads_build_two_realizations_at_once_where_two_scenes_fit(monkeypatch):
+    plan = Plan.from_config(spheres(1000), threads=2)
+    assert plan.built_together == 2 and Plan.from_config(spheres(1000)).built_together == 1
+    one_at_a_time = memory_estimate(dataclasses.replace(plan, built_together=1), 1)
+    assert memory_estimate(plan, 1) - one_at_a_time == plan.generator.scene_bytes(plan.scene)
+    monkeypatch.setattr(memory, "available_memory", lambda: one_at_a_time)  # room for one scene, not two
+    check_memory(plan, 1)
+    assert plan.built_together == 1

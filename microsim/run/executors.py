@@ -30,12 +30,14 @@ import multiprocessing.connection
 import os
 import signal
 import uuid
+from concurrent import futures
 from itertools import groupby
 
 import numpy as np
 
 from microsim.core import interrupts
 from microsim.physics.rng import geometry_rng, stream_key
+from microsim.tracer.integrators import scheduler
 
 #: Linux prctl option: the signal a process gets when its parent dies
 PR_SET_PDEATHSIG = 1
@@ -55,19 +57,48 @@ class SchedulerUnreachable(ValueError):
 
 def trace_units(plan, units, emit) -> None:
     """Trace ``units`` in order in this process, calling ``emit(unit, tally, scene_info)`` after
-    each; the scene of a realization is built once for its consecutive units."""
-    sensor, estimators, generator = plan.sensor, plan.estimators, plan.generator
+    each. The scene of a realization is built once for its consecutive units; where the plan
+    builds several realizations at once (``plan.built_together``, on two threads or more), the
+    next ones the units need are built together, one a thread, and held until traced."""
     seed, max_order = plan.config.run.seed, plan.config.run.max_order
-    current, tracer = None, None
-    for r, i in units:
-        if r != current:
-            scene = tracer = None  # the previous realization's scene and acceleration structure go first
-            scene = generator.generate(plan.scene, plan.config, geometry_rng(seed, r))
-            tracer = plan.tracer_class(scene, sensor, estimators=estimators, **plan.tracer_options)
-            current = r
+    built = {}
+    for position, (r, i) in enumerate(units):
+        if r not in built:
+            built = {}  # the previous realizations' scenes and acceleration structures go first
+            built = build_realizations(plan, next_realizations(units, position, plan.built_together))
+        scene, tracer = built[r]
         tally = tracer.trace(plan.incidence_direction(i), plan.paths_per_realization, stream_key(seed, r, i),
                              max_order, plan.albedo_scale, plan.phi_i[i])
         emit((r, i), tally, scene.info)
+
+
+def next_realizations(units: list, position: int, count: int) -> list[int]:
+    """The first ``count`` distinct realizations of ``units[position:]``, in order."""
+    ahead = []
+    for r, _ in units[position:]:
+        if r not in ahead:
+            if len(ahead) == count:
+                break
+            ahead.append(r)
+    return ahead
+
+
+def build_realizations(plan, realizations: list[int]) -> dict:
+    """realization -> (scene, tracer), built at once: the first on this thread, each other on a
+    thread of the tracer's pool (the builds release the GIL in their numpy and numba parts; a
+    realization's geometry is keyed by (seed, r) alone, so the scenes are those built one by one)."""
+    sensor, estimators, tracer_class = plan.sensor, plan.estimators, plan.tracer_class  # built here, once
+
+    def build(r):
+        scene = plan.generator.generate(plan.scene, plan.config, geometry_rng(plan.config.run.seed, r))
+        return scene, tracer_class(scene, sensor, estimators=estimators, **plan.tracer_options)
+
+    handed = [scheduler.pool(plan.threads).submit(build, r) for r in realizations[1:]]
+    try:
+        mine = build(realizations[0])
+    finally:
+        futures.wait(handed)  # every build ends before this one's error, if any, is raised
+    return dict(zip(realizations, [mine, *(future.result() for future in handed)]))
 
 
 def split(units: list, parts: int) -> list[list]:

@@ -18,8 +18,8 @@ WORKER_BYTES = 100 * 2**20
 
 def memory_estimate(plan: Plan, workers: int, spawned: bool = False) -> int:
     """Peak bytes of a run, all processes: each tracing process (the main one, or one worker per
-    block of units, forked or, with ``spawned``, started afresh as Dask's are) holds one
-    realization's scene (the generator's ``scene_bytes``), what its tracer works in while it
+    block of units, forked or, with ``spawned``, started afresh as Dask's are) holds the scenes of
+    ``plan.built_together`` realizations (the generator's ``scene_bytes``), what its tracer works in while it
     traces (the tracer's own ``working_bytes``: a batch of path rows, or the chunk tallies of a
     wave), and its unit's tally; the main process sums into per-incidence estimates and buffers
     the tallies of units that arrive early (up to all but one worker's share)."""
@@ -27,7 +27,7 @@ def memory_estimate(plan: Plan, workers: int, spawned: bool = False) -> int:
     tally = 8 * albedos * sum(estimator.tally_values() for estimator in plan.estimators)
     working = plan.tracer_class.working_bytes(plan.backend, plan.threads, plan.paths_per_realization, tally,
                                               estimators.shadow_rays(plan.estimators))
-    tracing = plan.generator.scene_bytes(plan.scene) + working + 2 * tally
+    tracing = plan.built_together * plan.generator.scene_bytes(plan.scene) + working + 2 * tally
     units = len(plan.units)
     processes = len(executors.split(plan.units, max(1, workers)))
     estimates = 8 * albedos * sum(estimator.estimate_values() for estimator in plan.estimators)
@@ -58,8 +58,13 @@ def available_memory() -> int | None:
 
 
 def check_memory(plan: Plan, workers: int, spawned: bool = False) -> None:
-    """Refuse (PlanError, one line) a run whose :func:`memory_estimate` exceeds the free memory."""
+    """Refuse (PlanError, one line) a run whose :func:`memory_estimate` exceeds the free memory;
+    where it fits with one realization built at a time and not with ``plan.built_together``, lower
+    that to one."""
     need, free = memory_estimate(plan, workers, spawned), available_memory()
+    if free is not None and need > free and plan.built_together > 1:
+        plan.built_together = 1
+        need = memory_estimate(plan, workers, spawned)
     size = getattr(plan.generator, "SIZE", "lower the scene's tile or depth")
     if free is not None and need > free:
         raise PlanError(f"this run needs about {need / 2**30:.3g} GiB of memory (scene "

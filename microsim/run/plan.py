@@ -24,6 +24,11 @@ from microsim.tracer import embree, estimators, integrators
 from microsim.tracer.sensor import Sensor
 
 
+#: realizations a process of two threads or more builds at once, one a thread: a build runs on
+#: one thread, and the others would wait (docs/developer/performance.md)
+BUILT_TOGETHER = 2
+
+
 @dataclass
 class Plan:
     """Everything a worker needs to trace any unit of a run (picklable). Its parts (the sensor,
@@ -43,6 +48,9 @@ class Plan:
     threads: int = 1
     albedos: tuple = ()  # the material's albedos traced together (conventions §4); () for one
     estimator_names: tuple = estimators.DEFAULT  # the run's estimators (microsim.tracer.estimators)
+    #: realizations a tracing process builds at once, one a thread (microsim.run.executors.trace_units):
+    #: BUILT_TOGETHER on two threads or more, unless two scenes would not fit (microsim.run.memory)
+    built_together: int = 1
 
     @functools.cached_property
     def albedo_scale(self) -> np.ndarray:
@@ -72,7 +80,7 @@ class Plan:
         notes += [substitution] if substitution else []
         return cls(config, generator.resolve(config), theta, phi, config.sensor.cells, run.realizations,
                    math.ceil(run.paths / run.realizations), backend, "; ".join(notes), threads, albedos_of(config),
-                   estimators.names_for(config))
+                   estimators.names_for(config), min(threads, BUILT_TOGETHER))
 
     @property
     def n_incidences(self) -> int:

@@ -22,6 +22,7 @@ import ctypes
 import functools
 import importlib.util
 import os
+import threading
 from collections import namedtuple
 from pathlib import Path
 
@@ -119,15 +120,18 @@ class _Library:
             setattr(self, name, function)
         self.path = path
         self._devices = {}  # process id -> device
+        self._making = threading.Lock()  # threads building scenes at once make one device
 
     @property
     def device(self):
         pid = os.getpid()
         if pid not in self._devices:
-            device = self.rtcNewDevice(os.environ.get(DEVICE_CONFIG_VARIABLE, "").encode() or None)
-            if not device:
-                raise EmbreeUnavailable(f"rtcNewDevice failed in {self.path.name}")
-            self._devices[pid] = device
+            with self._making:
+                if pid not in self._devices:
+                    device = self.rtcNewDevice(os.environ.get(DEVICE_CONFIG_VARIABLE, "").encode() or None)
+                    if not device:
+                        raise EmbreeUnavailable(f"rtcNewDevice failed in {self.path.name}")
+                    self._devices[pid] = device
         return self._devices[pid]
 
     def property(self, which: int) -> int:

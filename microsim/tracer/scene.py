@@ -192,11 +192,16 @@ class SceneBuilder:
         self.add(vertices, faces, np.zeros(2, np.int32), plane, material)
 
     def build(self, z_top: float, z_bottom: float, info: dict) -> Scene:
-        faces = np.concatenate(self.faces or [np.zeros((0, 3), np.int32)])
-        return Scene(np.concatenate(self.vertices or [np.zeros((0, 3))]), faces,
-                     np.concatenate(self.face_shape or [np.zeros(0, np.int32)]), Shapes.concatenate(self.shapes),
+        faces = _joined(self.faces, np.zeros((0, 3), np.int32))
+        return Scene(_joined(self.vertices, np.zeros((0, 3))), faces,
+                     _joined(self.face_shape, np.zeros(0, np.int32)), Shapes.concatenate(self.shapes),
                      MaterialTable.of(self.materials), self.tile, z_top, z_bottom,
                      dict(info, triangles=int(len(faces))),
-                     np.concatenate(self.spheres or [np.zeros((0, 4))]),
-                     np.concatenate(self.sphere_shape or [np.zeros(0, np.int32)]), self.sphere_scale,
+                     _joined(self.spheres, np.zeros((0, 4))),
+                     _joined(self.sphere_shape, np.zeros(0, np.int32)), self.sphere_scale,
                      self.base_material, self.tile_y)
+
+
+def _joined(parts: list, empty: np.ndarray) -> np.ndarray:
+    """The parts one after the other (one part: itself, not copied; none: ``empty``)."""
+    return parts[0] if len(parts) == 1 else np.concatenate(parts or [empty])

@@ -54,8 +54,8 @@ class Shapes:
     size: np.ndarray  # (S,) float64 characteristic length, scales the ray offset
 
     def __post_init__(self):
-        unknown = set(np.unique(self.code).tolist()) - set(CODES.values())
-        if unknown:
+        if len(self.code) and (self.code.min() < 0 or self.code.max() >= len(CODES)):  # the codes are 0 .. len - 1
+            unknown = set(np.unique(self.code).tolist()) - set(CODES.values())
             raise ValueError(f"shape kind codes {sorted(unknown)} unknown; known: {CODES}")
 
     @classmethod
@@ -70,10 +70,13 @@ class Shapes:
     @staticmethod
     def concatenate(parts: list["Shapes"]) -> "Shapes":
         """The parts' rows in order, as wide as the widest (narrower rows padded with zeros)."""
+        if len(parts) == 1:
+            return parts[0]
         width = max(p.params.shape[1] for p in parts)
         return Shapes(
             np.concatenate([p.code for p in parts]).astype(np.int32),
-            np.concatenate([np.pad(p.params, ((0, 0), (0, width - p.params.shape[1]))) for p in parts]),
+            np.concatenate([np.pad(p.params, ((0, 0), (0, width - p.params.shape[1]))) if p.params.shape[1] < width
+                            else p.params for p in parts]),
             np.concatenate([p.material for p in parts]).astype(np.int32),
             np.concatenate([p.size for p in parts]),
         )
@@ -89,10 +92,14 @@ class Shapes:
 
     @staticmethod
     def planes(points, normals, size) -> "Shapes":
-        n = len(points)
-        params = np.zeros((n, N_PARAMS))
-        params[:, 0:3] = points
-        params[:, 3:6] = normals / np.linalg.norm(normals, axis=1)[:, None]
+        """Planes through ``points`` (n, 3) facing ``normals`` (n, 3), made unit here."""
+        params = _plane_rows(np.ascontiguousarray(points, np.float64), np.ascontiguousarray(normals, np.float64))
+        return Shapes.planes_of_rows(params, size)
+
+    @staticmethod
+    def planes_of_rows(params, size) -> "Shapes":
+        """Planes whose rows ``params`` (n, N_PARAMS) :func:`set_plane_row` wrote."""
+        n = len(params)
         return Shapes(np.full(n, PLANE, np.int32), params, np.zeros(n, np.int32), np.full(n, size, float))
 
     @staticmethod
@@ -121,6 +128,24 @@ class Shapes:
         n = len(corners)
         params = np.column_stack([corners[:, 0], g, n0, m.reshape(n, 9)])
         return Shapes(np.full(n, SMOOTH, np.int32), params, np.zeros(n, np.int32), np.full(n, size, float))
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _plane_rows(points, normals):
+    """Rows of PLANE shapes through ``points`` facing ``normals`` (:func:`set_plane_row`)."""
+    params = np.zeros((len(points), N_PARAMS))
+    for i in range(len(points)):
+        set_plane_row(params[i], points[i, 0], points[i, 1], points[i, 2], normals[i, 0], normals[i, 1], normals[i, 2])
+    return params
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def set_plane_row(row, px, py, pz, nx, ny, nz):
+    """Write a PLANE shape's parameters into ``row`` (zeros): the point, then the normal over its
+    length (bit for bit as ``normals / np.linalg.norm(normals, axis=1)[:, None]``)."""
+    length = math.sqrt(nx * nx + ny * ny + nz * nz)
+    row[0], row[1], row[2] = px, py, pz
+    row[3], row[4], row[5] = nx / length, ny / length, nz / length
 
 
 @numba.njit(cache=True, error_model="numpy", _nrt=False, inline="always")
