@@ -14,6 +14,7 @@ import pytest
 
 from microsim import config, tables
 from microsim.cli import main
+from microsim.run import executors
 from microsim.run.plan import Plan, PlanError
 from microsim.testing import trace
 from microsim.tracer import embree
@@ -45,6 +46,22 @@ def test_tables_are_bit_identical_for_any_thread_count(intersector):
     cfg = config.validate(spheres("direct", paths=paths, intersector=intersector))  # and a partial chunk
     one = trace(cfg, threads=1)
     for threads in (2, 3):  # 3: shares of a wave that differ in size
+        other = trace(cfg, threads=threads)
+        assert np.array_equal(one.counts, other.counts)
+        for a, b in zip(one.brdf + one.albedo + one.energy, other.brdf + other.albedo + other.energy):
+            assert a.total.tobytes() == b.total.tobytes() and a.squares.tobytes() == b.squares.tobytes()
+
+
+@pytest.mark.parametrize("intersector", ["embree", "grid"])
+def test_units_traced_side_by_side_give_the_table_of_one_thread(intersector):
+    """With units enough, two or three threads trace a unit each (the next realization built on one
+    of them): the table of one thread, bit for bit."""
+    data = spheres("direct", paths=8 * (scheduler.CHUNK_PATHS + 17), intersector=intersector)
+    data["run"]["realizations"] = 8  # 16 units of a chunk and 17 paths
+    cfg = config.validate(data)
+    one = trace(cfg, threads=1)
+    for threads in (2, 3):
+        assert executors.side_by_side(Plan.from_config(cfg, threads=threads), 16)
         other = trace(cfg, threads=threads)
         assert np.array_equal(one.counts, other.counts)
         for a, b in zip(one.brdf + one.albedo + one.energy, other.brdf + other.albedo + other.energy):

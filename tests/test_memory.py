@@ -60,11 +60,12 @@ def test_a_run_that_cannot_fit_is_refused_in_one_line(tmp_path, capsys):
     assert not out.exists()
 
 
-def test_two_threads_build_two_realizations_at_once_where_two_scenes_fit(monkeypatch):
-    plan = Plan.from_config(spheres(1000), threads=2)
-    assert plan.built_together == 2 and Plan.from_config(spheres(1000)).built_together == 1
-    one_at_a_time = memory_estimate(dataclasses.replace(plan, built_together=1), 1)
-    assert memory_estimate(plan, 1) - one_at_a_time == plan.generator.scene_bytes(plan.scene)
-    monkeypatch.setattr(memory, "available_memory", lambda: one_at_a_time)  # room for one scene, not two
+def test_two_threads_build_the_next_realization_ahead_where_two_scenes_fit(monkeypatch):
+    cfg = spheres(1000).model_copy(update={"run": spheres(1000).run.model_copy(update={"realizations": 2})})
+    plan = Plan.from_config(cfg, threads=2)  # 4 units: too few to trace side by side, so only the scenes differ
+    assert plan.builds_ahead and not Plan.from_config(cfg).builds_ahead
+    one_scene = memory_estimate(dataclasses.replace(plan, builds_ahead=False), 1)
+    assert memory_estimate(plan, 1) - one_scene == plan.generator.scene_bytes(plan.scene)
+    monkeypatch.setattr(memory, "available_memory", lambda: one_scene)  # room for one scene, not two
     check_memory(plan, 1)
-    assert plan.built_together == 1
+    assert not plan.builds_ahead

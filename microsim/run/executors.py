@@ -23,6 +23,7 @@ PR_SET_PDEATHSIG alone, which kills it when the main process exits.
 
 from __future__ import annotations
 
+import collections
 import ctypes
 import logging
 import multiprocessing
@@ -30,7 +31,7 @@ import multiprocessing.connection
 import os
 import signal
 import uuid
-from concurrent import futures
+from concurrent.futures import ThreadPoolExecutor
 from itertools import groupby
 
 import numpy as np
@@ -55,50 +56,108 @@ class SchedulerUnreachable(ValueError):
     """No Dask scheduler answers at the address given; the message is one line."""
 
 
+#: units a thread at least for a process to trace its units side by side, one a thread
+#: (:func:`trace_units`); with fewer, the units' chunks are shared instead
+UNITS_A_THREAD = 4
+
+
+def side_by_side(plan, n_units: int) -> bool:
+    """Whether a process traces its ``n_units`` units side by side, one a thread, each on one
+    thread (:func:`trace_units`): on two threads or more, with two scenes held, and units enough."""
+    return plan.threads > 1 and plan.builds_ahead and n_units >= UNITS_A_THREAD * plan.threads
+
+
 def trace_units(plan, units, emit) -> None:
-    """Trace ``units`` in order in this process, calling ``emit(unit, tally, scene_info)`` after
-    each. The scene of a realization is built once for its consecutive units; where the plan
-    builds several realizations at once (``plan.built_together``, on two threads or more), the
-    next ones the units need are built together, one a thread, and held until traced."""
+    """Trace ``units`` in order in this process, calling ``emit(unit, tally, scene_info)`` in unit
+    order. Units enough on two threads or more (:func:`side_by_side`): the units side by side, one
+    a thread (:func:`_trace_side_by_side`). Otherwise one unit at a time, its chunks shared by the
+    threads; the scene of a realization is built once for its consecutive units, and with
+    ``plan.builds_ahead`` the next one is built on the tracer's pool while this one traces (its
+    thread claims chunks again when done), so that a build leaves no thread idle."""
+    if side_by_side(plan, len(units)):
+        _trace_side_by_side(plan, units, emit)
+        return
     seed, max_order = plan.config.run.seed, plan.config.run.max_order
-    built = {}
+    build = realization_builder(plan, plan.threads)
+    current = scene = tracer = None
+    ahead = None  # (realization, future of its (scene, tracer))
     for position, (r, i) in enumerate(units):
-        if r not in built:
-            built = {}  # the previous realizations' scenes and acceleration structures go first
-            built = build_realizations(plan, next_realizations(units, position, plan.built_together))
-        scene, tracer = built[r]
+        if r != current:
+            scene = tracer = None  # the previous realization's scene and acceleration structure go first
+            scene, tracer = ahead[1].result() if ahead is not None and ahead[0] == r else build(r)
+            current = r
+            following = next((s for s, _ in units[position:] if s != r), None)
+            ahead = (following, scheduler.pool(plan.threads).submit(build, following)) \
+                if plan.builds_ahead and following is not None else None
         tally = tracer.trace(plan.incidence_direction(i), plan.paths_per_realization, stream_key(seed, r, i),
                              max_order, plan.albedo_scale, plan.phi_i[i])
         emit((r, i), tally, scene.info)
 
 
-def next_realizations(units: list, position: int, count: int) -> list[int]:
-    """The first ``count`` distinct realizations of ``units[position:]``, in order."""
-    ahead = []
-    for r, _ in units[position:]:
-        if r not in ahead:
-            if len(ahead) == count:
-                break
-            ahead.append(r)
-    return ahead
+def _trace_side_by_side(plan, units, emit) -> None:
+    """The units on ``plan.threads`` threads of a pool, a unit a thread (its tracer on one thread:
+    the same tally bit for bit), in the order they come: each realization's build, then its units,
+    the tasks of two realizations queued at a time; a realization's scene is let go, and the
+    realization after the next queued, when its last unit is emitted. Tallies are emitted in
+    unit order from this thread, which only waits."""
+    seed, max_order = plan.config.run.seed, plan.config.run.max_order
+    build = realization_builder(plan, 1)
+
+    def trace(built, r, i):
+        scene, tracer = built.result()
+        return tracer.trace(plan.incidence_direction(i), plan.paths_per_realization, stream_key(seed, r, i),
+                            max_order, plan.albedo_scale, plan.phi_i[i]), scene.info
+
+    realizations = [(r, list(block)) for r, block in groupby(units, key=lambda unit: unit[0])]
+    queued = collections.deque()  # (unit, future of (tally, info), last unit of its realization)
+    pool = unit_pool(plan.threads)
+
+    def queue(k):
+        if k < len(realizations):
+            r, block = realizations[k]
+            built = pool.submit(build, r)
+            queued.extend((unit, pool.submit(trace, built, *unit), n == len(block) - 1) for n, unit in enumerate(block))
+
+    queue(0)
+    queue(1)
+    following = 2
+    try:
+        while queued:
+            unit, future, last = queued.popleft()
+            emit(unit, *future.result())
+            if last:
+                queue(following)
+                following += 1
+    finally:
+        for _, future, _ in queued:  # on an error: what has not started is dropped
+            future.cancel()
 
 
-def build_realizations(plan, realizations: list[int]) -> dict:
-    """realization -> (scene, tracer), built at once: the first on this thread, each other on a
-    thread of the tracer's pool (the builds release the GIL in their numpy and numba parts; a
-    realization's geometry is keyed by (seed, r) alone, so the scenes are those built one by one)."""
+#: this process's pools of unit tracers: threads -> a pool of that many threads
+_UNIT_POOLS: dict = {}
+
+
+def unit_pool(threads: int) -> ThreadPoolExecutor:
+    """The pool of ``threads`` threads that trace units side by side (:func:`_trace_side_by_side`)."""
+    if threads not in _UNIT_POOLS:
+        _UNIT_POOLS[threads] = ThreadPoolExecutor(threads, thread_name_prefix="microsim-unit")
+    return _UNIT_POOLS[threads]
+
+
+os.register_at_fork(after_in_child=_UNIT_POOLS.clear)  # a forked child has none of its parent's threads
+
+
+def realization_builder(plan, threads: int):
+    """``build(r)``: realization r's (scene, its tracer on ``threads`` threads); its geometry is
+    keyed by (seed, r) alone, so the scene does not depend on the thread that builds it."""
     sensor, estimators, tracer_class = plan.sensor, plan.estimators, plan.tracer_class  # built here, once
+    options = {**plan.tracer_options, "threads": threads}
 
     def build(r):
         scene = plan.generator.generate(plan.scene, plan.config, geometry_rng(plan.config.run.seed, r))
-        return scene, tracer_class(scene, sensor, estimators=estimators, **plan.tracer_options)
+        return scene, tracer_class(scene, sensor, estimators=estimators, **options)
 
-    handed = [scheduler.pool(plan.threads).submit(build, r) for r in realizations[1:]]
-    try:
-        mine = build(realizations[0])
-    finally:
-        futures.wait(handed)  # every build ends before this one's error, if any, is raised
-    return dict(zip(realizations, [mine, *(future.result() for future in handed)]))
+    return build
 
 
 def split(units: list, parts: int) -> list[list]:

@@ -18,18 +18,23 @@ WORKER_BYTES = 100 * 2**20
 
 def memory_estimate(plan: Plan, workers: int, spawned: bool = False) -> int:
     """Peak bytes of a run, all processes: each tracing process (the main one, or one worker per
-    block of units, forked or, with ``spawned``, started afresh as Dask's are) holds the scenes of
-    ``plan.built_together`` realizations (the generator's ``scene_bytes``), what its tracer works in while it
-    traces (the tracer's own ``working_bytes``: a batch of path rows, or the chunk tallies of a
-    wave), and its unit's tally; the main process sums into per-incidence estimates and buffers
-    the tallies of units that arrive early (up to all but one worker's share)."""
+    block of units, forked or, with ``spawned``, started afresh as Dask's are) holds one
+    realization's scene (the generator's ``scene_bytes``; two with ``plan.builds_ahead``: the next
+    one is built while one traces), what its tracers work in while they trace (the tracer's own
+    ``working_bytes``: a batch of path rows, or the chunk tallies of a wave; a tracer a thread
+    where units are traced side by side) and its units' tallies (two realizations' side by side);
+    the main process sums into per-incidence estimates and buffers the tallies of units that
+    arrive early (up to all but one worker's share)."""
     albedos = max(1, len(plan.albedos))
     tally = 8 * albedos * sum(estimator.tally_values() for estimator in plan.estimators)
-    working = plan.tracer_class.working_bytes(plan.backend, plan.threads, plan.paths_per_realization, tally,
-                                              estimators.shadow_rays(plan.estimators))
-    tracing = plan.built_together * plan.generator.scene_bytes(plan.scene) + working + 2 * tally
     units = len(plan.units)
     processes = len(executors.split(plan.units, max(1, workers)))
+    side_by_side = executors.side_by_side(plan, math.ceil(units / processes))
+    tracers, held = (plan.threads, 2 * plan.n_incidences) if side_by_side else (1, 2)
+    working = tracers * plan.tracer_class.working_bytes(plan.backend, plan.threads // tracers,
+                                                        plan.paths_per_realization, tally,
+                                                        estimators.shadow_rays(plan.estimators))
+    tracing = (1 + plan.builds_ahead) * plan.generator.scene_bytes(plan.scene) + working + held * tally
     estimates = 8 * albedos * sum(estimator.estimate_values() for estimator in plan.estimators)
     reducing = 3 * plan.n_incidences * estimates + units * tally * (processes - 1) // processes
     workers_bytes = (PROCESS_BYTES if spawned else WORKER_BYTES) * processes if processes > 1 or spawned else 0
@@ -59,11 +64,11 @@ def available_memory() -> int | None:
 
 def check_memory(plan: Plan, workers: int, spawned: bool = False) -> None:
     """Refuse (PlanError, one line) a run whose :func:`memory_estimate` exceeds the free memory;
-    where it fits with one realization built at a time and not with ``plan.built_together``, lower
-    that to one."""
+    where it fits with one scene a process and not with two, it builds no realization ahead
+    (``plan.builds_ahead`` turned off)."""
     need, free = memory_estimate(plan, workers, spawned), available_memory()
-    if free is not None and need > free and plan.built_together > 1:
-        plan.built_together = 1
+    if free is not None and need > free and plan.builds_ahead:
+        plan.builds_ahead = False
         need = memory_estimate(plan, workers, spawned)
     size = getattr(plan.generator, "SIZE", "lower the scene's tile or depth")
     if free is not None and need > free:

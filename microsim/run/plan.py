@@ -24,11 +24,6 @@ from microsim.tracer import embree, estimators, integrators
 from microsim.tracer.sensor import Sensor
 
 
-#: realizations a process of two threads or more builds at once, one a thread: a build runs on
-#: one thread, and the others would wait (docs/developer/performance.md)
-BUILT_TOGETHER = 2
-
-
 @dataclass
 class Plan:
     """Everything a worker needs to trace any unit of a run (picklable). Its parts (the sensor,
@@ -48,9 +43,9 @@ class Plan:
     threads: int = 1
     albedos: tuple = ()  # the material's albedos traced together (conventions §4); () for one
     estimator_names: tuple = estimators.DEFAULT  # the run's estimators (microsim.tracer.estimators)
-    #: realizations a tracing process builds at once, one a thread (microsim.run.executors.trace_units):
-    #: BUILT_TOGETHER on two threads or more, unless two scenes would not fit (microsim.run.memory)
-    built_together: int = 1
+    #: a process of two threads or more builds the next realization while one traces, and holds
+    #: both (microsim.run.executors.trace_units), unless two scenes would not fit (microsim.run.memory)
+    builds_ahead: bool = False
 
     @functools.cached_property
     def albedo_scale(self) -> np.ndarray:
@@ -80,7 +75,7 @@ class Plan:
         notes += [substitution] if substitution else []
         return cls(config, generator.resolve(config), theta, phi, config.sensor.cells, run.realizations,
                    math.ceil(run.paths / run.realizations), backend, "; ".join(notes), threads, albedos_of(config),
-                   estimators.names_for(config), min(threads, BUILT_TOGETHER))
+                   estimators.names_for(config), threads > 1)
 
     @property
     def n_incidences(self) -> int:

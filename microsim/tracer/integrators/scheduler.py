@@ -3,8 +3,8 @@
 The paths of a unit are cut into chunks of ``CHUNK_PATHS`` consecutive paths, and the chunks
 into waves of up to ``WAVE_CHUNKS_PER_THREAD`` per thread. Each chunk is traced to completion
 into a tally of its own (a row of the :class:`Workspace`) by a kernel the integrator gives,
-``trace_share(first, start, stop)``: ``threads`` Python threads share a wave, one numba call each
-for a contiguous share of its chunks (:func:`thread_shares`), the call releasing the GIL. The
+``trace_share(first, start, stop)``: ``threads`` Python threads share a wave, each claiming the
+next chunk as it ends one (:func:`trace_claimed`), one numba call a chunk releasing the GIL. The
 chunk tallies are then summed in chunk order (:func:`microsim.core.tally.add_rows`). A path's random stream is
 keyed by its number, and a chunk's order of events depends on its paths alone, so a table
 depends neither on the number of threads nor on which thread traced which chunk: bit-identical
@@ -12,8 +12,9 @@ for any thread count.
 
 Python threads rather than a numba ``prange``: numba's parallel loops take no tuples of arrays
 (the named bundles), and its OpenMP layer is not fork-safe (the runner forks worker processes
-after compiling). The calling thread traces the first share and a pool of ``threads - 1``
-threads the others; the pool lives as long as the process (a run traces a unit at a time, and
+after compiling). The calling thread traces beside a pool of ``threads - 1`` threads, which
+also builds the next realization while this one traces (:mod:`microsim.run.executors`); the
+pool lives as long as the process (a run traces a unit at a time, and
 starting two threads for each took 6 % of a two-thread run of runs/spheres_phi030.toml), and a
 forked child starts a pool of its own. Chunk and wave sizes, and what they cost:
 docs/developer/performance.md.
@@ -21,6 +22,7 @@ docs/developer/performance.md.
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 from collections import namedtuple
@@ -104,15 +106,31 @@ def trace_in_waves(beam, estimators, threads: int, work: Workspace, trace_share)
     for first in range(0, n_chunks, wave_chunks):
         count = min(wave_chunks, n_chunks - first)
         clear_rows(work, count)
-        shares = [(first, a, b) for a, b in thread_shares(first, count, beam.n_paths, threads) if b > a]
-        handed = [pool(threads).submit(trace_share, *share) for share in shares[1:]]
-        try:
-            trace_share(*shares[0])  # this thread's share, the others' on the pool
-        finally:
-            for future in handed:  # every share ends before its rows are read, or the run fails
-                future.result()
+        if threads == 1:
+            trace_share(first, 0, count)
+        else:
+            trace_claimed(first, count, threads, trace_share)
         add_rows(total, work.estimates, work.energy, work.counts, count)
     return total
+
+
+def trace_claimed(first: int, count: int, threads: int, trace_share) -> None:
+    """Chunks first .. first+count-1 traced by this thread and the pool's, each thread claiming
+    the next chunk not yet claimed as it ends one: a pool thread busy elsewhere (building the next
+    realization) joins when it is free, and is not waited for if the chunks are all claimed by then."""
+    claims = itertools.count()  # next() is atomic under the GIL
+
+    def trace_chunks():
+        while (k := next(claims)) < count:
+            trace_share(first, k, k + 1)
+
+    helpers = [pool(threads).submit(trace_chunks) for _ in range(threads - 1)]
+    try:
+        trace_chunks()
+    finally:
+        for helper in helpers:  # every chunk ends before its row is read, or the run fails
+            if not helper.cancel():
+                helper.result()
 
 
 #: this process's pools: threads -> a pool of threads - 1 threads (module doc)
@@ -120,22 +138,13 @@ _POOLS: dict = {}
 
 
 def pool(threads: int) -> ThreadPoolExecutor:
-    """The pool of ``threads - 1`` threads that trace a wave's shares beside the calling thread."""
+    """The pool of ``threads - 1`` threads that trace a wave's chunks beside the calling thread."""
     if threads not in _POOLS:
         _POOLS[threads] = ThreadPoolExecutor(threads - 1, thread_name_prefix="microsim-trace")
     return _POOLS[threads]
 
 
 os.register_at_fork(after_in_child=_POOLS.clear)  # a forked child has none of its parent's threads
-
-
-def thread_shares(first: int, count: int, n_paths: int, threads: int) -> list[tuple[int, int]]:
-    """Chunks first .. first+count-1 cut into ``threads`` contiguous shares (start, stop) of about
-    equal paths (the last chunk of a unit may be short)."""
-    done = np.minimum((first + np.arange(count + 1)) * CHUNK_PATHS, n_paths) - first * CHUNK_PATHS  # before chunk k
-    targets = done[-1] * np.arange(threads + 1) / threads
-    edges = np.abs(done[None, :] - targets[:, None]).argmin(axis=1)
-    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
 
 
 def clear_rows(work: Workspace, count: int) -> None:
