@@ -31,6 +31,7 @@ distributions are).
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -122,6 +123,7 @@ def source(config) -> tuple[str, Path]:
 
 #: the last tile read (:func:`remembered`): its key and (tile, file digest)
 _LAST: dict = {}
+_REMEMBERING = threading.RLock()
 
 
 def remembered(config, read):
@@ -131,11 +133,12 @@ def remembered(config, read):
     file = Path(config.scene.path)
     state = (file.stat().st_mtime_ns, file.stat().st_size) if file.is_file() else None
     key = (config.scene.model_dump_json(), config.base is not None, state)
-    if key not in _LAST:
-        value = read(config)
-        _LAST.clear()
-        _LAST[key] = value
-    return _LAST[key]
+    with _REMEMBERING:  # realizations may be built on two threads at once
+        if key not in _LAST:
+            value = read(config)
+            _LAST.clear()
+            _LAST[key] = value
+        return _LAST[key]
 
 
 def require_period(key: str, period: float) -> None:

@@ -8,6 +8,7 @@ are added (a few ulp). Its tables must not depend on the number of threads.
 
 import subprocess
 import sys
+import threading
 
 import numpy as np
 import pytest
@@ -19,6 +20,7 @@ from microsim.run.plan import Plan, PlanError
 from microsim.testing import trace
 from microsim.tracer import embree
 from microsim.tracer.integrators import scheduler
+from microsim.tracer.integrators.surface import SurfaceTracer
 
 
 def spheres(backend: str, paths: int = 24_000, **scene) -> dict:
@@ -61,11 +63,45 @@ def test_units_traced_side_by_side_give_the_table_of_one_thread(intersector):
     cfg = config.validate(data)
     one = trace(cfg, threads=1)
     for threads in (2, 3):
-        assert executors.side_by_side(Plan.from_config(cfg, threads=threads), 16)
         other = trace(cfg, threads=threads)
+        assert executors.side_by_side(other.plan, 16)
         assert np.array_equal(one.counts, other.counts)
         for a, b in zip(one.brdf + one.albedo + one.energy, other.brdf + other.albedo + other.energy):
             assert a.total.tobytes() == b.total.tobytes() and a.squares.tobytes() == b.squares.tobytes()
+
+
+def test_an_error_while_units_trace_side_by_side_leaves_no_thread_at_work(monkeypatch):
+    """The run's error (here its first unit's tally cannot be kept) ends it: what has not started
+    is dropped, and when the error reaches the caller no trace or build is still under way."""
+    data = spheres("direct", paths=4 * 40_000)
+    data["run"]["realizations"] = 4  # 8 units of 40 000 paths, two waves each on one thread
+    plan = Plan.from_config(config.validate(data), threads=2)
+    assert executors.side_by_side(plan, len(plan.units))
+    started, ended, lock = [], [], threading.Lock()
+
+    def counted(function, kind):
+        def run(*args, **kwargs):
+            with lock:
+                started.append(kind)
+            try:
+                return function(*args, **kwargs)
+            finally:
+                with lock:
+                    ended.append(kind)
+        return run
+
+    build = executors.realization_builder
+    monkeypatch.setattr(executors, "realization_builder", lambda plan, threads: counted(build(plan, threads), "build"))
+    trace_unit = SurfaceTracer.trace
+    monkeypatch.setattr(SurfaceTracer, "trace", counted(trace_unit, "trace"))
+
+    def emit(unit, tally, info):
+        raise OSError("no space left on device")
+
+    with pytest.raises(OSError):
+        executors.trace_units(plan, plan.units, emit)
+    with lock:
+        assert sorted(started) == sorted(ended) and started.count("trace") < len(plan.units)
 
 
 def test_the_rows_two_chunks_write_share_no_cache_line():

@@ -30,7 +30,9 @@ import multiprocessing
 import multiprocessing.connection
 import os
 import signal
+import threading
 import uuid
+from concurrent import futures
 from concurrent.futures import ThreadPoolExecutor
 from itertools import groupby
 
@@ -81,17 +83,21 @@ def trace_units(plan, units, emit) -> None:
     build = realization_builder(plan, plan.threads)
     current = scene = tracer = None
     ahead = None  # (realization, future of its (scene, tracer))
-    for position, (r, i) in enumerate(units):
-        if r != current:
-            scene = tracer = None  # the previous realization's scene and acceleration structure go first
-            scene, tracer = ahead[1].result() if ahead is not None and ahead[0] == r else build(r)
-            current = r
-            following = next((s for s, _ in units[position:] if s != r), None)
-            ahead = (following, scheduler.pool(plan.threads).submit(build, following)) \
-                if plan.builds_ahead and following is not None else None
-        tally = tracer.trace(plan.incidence_direction(i), plan.paths_per_realization, stream_key(seed, r, i),
-                             max_order, plan.albedo_scale, plan.phi_i[i])
-        emit((r, i), tally, scene.info)
+    try:
+        for position, (r, i) in enumerate(units):
+            if r != current:
+                scene = tracer = None  # the previous realization's scene and acceleration structure go first
+                scene, tracer = ahead[1].result() if ahead is not None and ahead[0] == r else build(r)
+                current = r
+                following = next((s for s, _ in units[position:] if s != r), None)
+                ahead = (following, scheduler.pool(plan.threads).submit(build, following)) \
+                    if plan.builds_ahead and following is not None else None
+            tally = tracer.trace(plan.incidence_direction(i), plan.paths_per_realization, stream_key(seed, r, i),
+                                 max_order, plan.albedo_scale, plan.phi_i[i])
+            emit((r, i), tally, scene.info)
+    finally:
+        if ahead is not None and not ahead[1].cancel():  # on an error: a build under way ends first
+            futures.wait([ahead[1]])
 
 
 def _trace_side_by_side(plan, units, emit) -> None:
@@ -99,24 +105,30 @@ def _trace_side_by_side(plan, units, emit) -> None:
     the same tally bit for bit), in the order they come: each realization's build, then its units,
     the tasks of two realizations queued at a time; a realization's scene is let go, and the
     realization after the next queued, when its last unit is emitted. Tallies are emitted in
-    unit order from this thread, which only waits."""
+    unit order from this thread, which only waits. On an error (or an interrupt) here, what has
+    not started is dropped, traces under way end before their next wave, and this returns when
+    the pool's threads are free."""
     seed, max_order = plan.config.run.seed, plan.config.run.max_order
     build = realization_builder(plan, 1)
+    ended = threading.Event()
 
     def trace(built, r, i):
         scene, tracer = built.result()
-        return tracer.trace(plan.incidence_direction(i), plan.paths_per_realization, stream_key(seed, r, i),
-                            max_order, plan.albedo_scale, plan.phi_i[i]), scene.info
+        with scheduler.abandoned_when(ended):
+            return tracer.trace(plan.incidence_direction(i), plan.paths_per_realization, stream_key(seed, r, i),
+                                max_order, plan.albedo_scale, plan.phi_i[i]), scene.info
 
     realizations = [(r, list(block)) for r, block in groupby(units, key=lambda unit: unit[0])]
     queued = collections.deque()  # (unit, future of (tally, info), last unit of its realization)
+    builds = []  # the futures of the realizations' builds, in order
     pool = unit_pool(plan.threads)
 
     def queue(k):
         if k < len(realizations):
             r, block = realizations[k]
-            built = pool.submit(build, r)
-            queued.extend((unit, pool.submit(trace, built, *unit), n == len(block) - 1) for n, unit in enumerate(block))
+            builds.append(pool.submit(build, r))
+            queued.extend((unit, pool.submit(trace, builds[-1], *unit), n == len(block) - 1)
+                          for n, unit in enumerate(block))
 
     queue(0)
     queue(1)
@@ -129,8 +141,10 @@ def _trace_side_by_side(plan, units, emit) -> None:
                 queue(following)
                 following += 1
     finally:
-        for _, future, _ in queued:  # on an error: what has not started is dropped
-            future.cancel()
+        if queued:  # an error: nothing more is traced or built, and no thread is left at work
+            ended.set()
+            pending = [future for _, future, _ in reversed(queued)] + builds[::-1]
+            futures.wait([future for future in pending if not future.cancel()])
 
 
 #: this process's pools of unit tracers: threads -> a pool of that many threads

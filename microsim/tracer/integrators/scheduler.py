@@ -13,18 +13,20 @@ for any thread count.
 Python threads rather than a numba ``prange``: numba's parallel loops take no tuples of arrays
 (the named bundles), and its OpenMP layer is not fork-safe (the runner forks worker processes
 after compiling). The calling thread traces beside a pool of ``threads - 1`` threads, which
-also builds the next realization while this one traces (:mod:`microsim.run.executors`); the
-pool lives as long as the process (a run traces a unit at a time, and
-starting two threads for each took 6 % of a two-thread run of runs/spheres_phi030.toml), and a
-forked child starts a pool of its own. Chunk and wave sizes, and what they cost:
-docs/developer/performance.md.
+also builds the next realization while this one traces (:mod:`microsim.run.executors`, where
+a process of units enough traces them side by side instead, a unit on one thread each); the
+pool lives as long as the process (starting two threads for each unit took 6 % of a two-thread
+run of runs/spheres_phi030.toml), and a forked child starts a pool of its own. Chunk and wave
+sizes, and what they cost: docs/developer/performance.md.
 """
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import math
 import os
+import threading
 from collections import namedtuple
 from concurrent.futures import ThreadPoolExecutor
 
@@ -37,8 +39,8 @@ from microsim.tracer.integrators.records import Rays, allocate_paths
 
 #: paths of one chunk: traced in order by one thread, into a tally of their own (module doc)
 CHUNK_PATHS = 8192
-#: chunks of a wave per thread, each thread tracing a contiguous share in one call; the wave's
-#: chunk tallies are then summed in chunk order
+#: chunks of a wave per thread (the threads claim them one by one); the wave's chunk tallies are
+#: then summed in chunk order
 WAVE_CHUNKS_PER_THREAD = 4
 
 
@@ -99,11 +101,14 @@ def trace_in_waves(beam, estimators, threads: int, work: Workspace, trace_share)
     """The tally of the beam's paths cut into chunks of CHUNK_PATHS, traced in waves of
     :func:`wave_rows` chunks on ``threads`` threads: ``trace_share(first, start, stop)`` traces
     chunks first+start .. first+stop-1 into the tally rows start .. stop-1 of ``work``, releasing
-    the GIL; each wave's rows are added in chunk order (:func:`microsim.core.tally.add_rows`)."""
+    the GIL; each wave's rows are added in chunk order (:func:`microsim.core.tally.add_rows`).
+    Raises Abandoned before a wave once the run this thread traces for has ended (:func:`abandoned_when`)."""
     n_chunks = math.ceil(beam.n_paths / CHUNK_PATHS)
     wave_chunks = WAVE_CHUNKS_PER_THREAD * threads
     total = empty_tally(beam.n_paths, estimators, beam.albedo_scale)
     for first in range(0, n_chunks, wave_chunks):
+        if (ended := getattr(_RUN_ENDED, "event", None)) is not None and ended.is_set():
+            raise Abandoned
         count = min(wave_chunks, n_chunks - first)
         clear_rows(work, count)
         if threads == 1:
@@ -131,6 +136,25 @@ def trace_claimed(first: int, count: int, threads: int, trace_share) -> None:
         for helper in helpers:  # every chunk ends before its row is read, or the run fails
             if not helper.cancel():
                 helper.result()
+
+
+class Abandoned(Exception):
+    """A trace ended between two waves: the run it traced for has ended (:func:`abandoned_when`)."""
+
+
+#: per thread: the event at which its traces end (:func:`abandoned_when`)
+_RUN_ENDED = threading.local()
+
+
+@contextlib.contextmanager
+def abandoned_when(event: threading.Event):
+    """Traces on this thread raise Abandoned before their next wave once ``event`` is set: the run
+    they trace for has ended in an error, and would not use their tallies."""
+    _RUN_ENDED.event = event
+    try:
+        yield
+    finally:
+        _RUN_ENDED.event = None
 
 
 #: this process's pools: threads -> a pool of threads - 1 threads (module doc)
