@@ -79,7 +79,6 @@ def trace_units(plan, units, emit) -> None:
     if side_by_side(plan, len(units)):
         _trace_side_by_side(plan, units, emit)
         return
-    seed, max_order = plan.config.run.seed, plan.config.run.max_order
     build = realization_builder(plan, plan.threads)
     current = scene = tracer = None
     ahead = None  # (realization, future of its (scene, tracer))
@@ -92,9 +91,7 @@ def trace_units(plan, units, emit) -> None:
                 following = next((s for s, _ in units[position:] if s != r), None)
                 ahead = (following, scheduler.pool(plan.threads).submit(build, following)) \
                     if plan.builds_ahead and following is not None else None
-            tally = tracer.trace(plan.incidence_direction(i), plan.paths_per_realization, stream_key(seed, r, i),
-                                 max_order, plan.albedo_scale, plan.phi_i[i])
-            emit((r, i), tally, scene.info)
+            emit((r, i), trace_unit(plan, tracer, r, i), scene.info)
     finally:
         if ahead is not None and not ahead[1].cancel():  # on an error: a build under way ends first
             futures.wait([ahead[1]])
@@ -108,15 +105,13 @@ def _trace_side_by_side(plan, units, emit) -> None:
     unit order from this thread, which only waits. On an error (or an interrupt) here, what has
     not started is dropped, traces under way end before their next wave, and this returns when
     the pool's threads are free."""
-    seed, max_order = plan.config.run.seed, plan.config.run.max_order
     build = realization_builder(plan, 1)
     ended = threading.Event()
 
     def trace(built, r, i):
         scene, tracer = built.result()
         with scheduler.abandoned_when(ended):
-            return tracer.trace(plan.incidence_direction(i), plan.paths_per_realization, stream_key(seed, r, i),
-                                max_order, plan.albedo_scale, plan.phi_i[i]), scene.info
+            return trace_unit(plan, tracer, r, i), scene.info
 
     realizations = [(r, list(block)) for r, block in groupby(units, key=lambda unit: unit[0])]
     queued = collections.deque()  # (unit, future of (tally, info), last unit of its realization)
@@ -159,6 +154,13 @@ def unit_pool(threads: int) -> ThreadPoolExecutor:
 
 
 os.register_at_fork(after_in_child=_UNIT_POOLS.clear)  # a forked child has none of its parent's threads
+
+
+def trace_unit(plan, tracer, r: int, i: int):
+    """The tally of unit (r, i) on realization r's ``tracer``: its paths at incidence i, on the
+    random stream of (seed, r, i)."""
+    return tracer.trace(plan.incidence_direction(i), plan.paths_per_realization, stream_key(plan.config.run.seed, r, i),
+                        plan.config.run.max_order, plan.albedo_scale, plan.phi_i[i])
 
 
 def realization_builder(plan, threads: int):

@@ -30,10 +30,10 @@ def memory_estimate(plan: Plan, workers: int, spawned: bool = False) -> int:
     units = len(plan.units)
     processes = len(executors.split(plan.units, max(1, workers)))
     side_by_side = executors.side_by_side(plan, math.ceil(units / processes))
-    tracers, held = (plan.threads, 2 * plan.n_incidences) if side_by_side else (1, 2)
-    working = tracers * plan.tracer_class.working_bytes(plan.backend, plan.threads // tracers,
-                                                        plan.paths_per_realization, tally,
-                                                        estimators.shadow_rays(plan.estimators))
+    # side by side: a tracer of one thread on each thread, and two realizations' tallies held
+    tracers, tracer_threads, held = (plan.threads, 1, 2 * plan.n_incidences) if side_by_side else (1, plan.threads, 2)
+    working = tracers * plan.tracer_class.working_bytes(plan.backend, tracer_threads, plan.paths_per_realization,
+                                                        tally, estimators.shadow_rays(plan.estimators))
     tracing = (1 + plan.builds_ahead) * plan.generator.scene_bytes(plan.scene) + working + held * tally
     estimates = 8 * albedos * sum(estimator.estimate_values() for estimator in plan.estimators)
     reducing = 3 * plan.n_incidences * estimates + units * tally * (processes - 1) // processes
